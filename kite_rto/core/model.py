@@ -71,9 +71,10 @@ class KiteModel:
                                   ["x", "delta", "p", "dt"], ["x_next"])
         # Fast pure-Python translations of the same graphs (see pyfunc.py for why).
         after = self.expressions(x_next, e.delta, e.p)
-        step_out = ca.cse([x_next, ca.vertcat(after.tension, after.altitude, after.w_ap, after.position)])
+        step_out = ca.cse([x_next, ca.vertcat(after.tension, after.altitude, after.w_ap, after.position,
+                                                after.rhs)])
         self.step_py = to_python(ca.Function("kite_step_py", [e.x, e.delta, e.p, dt], step_out))
-        """``step_py(x, delta, p, dt) -> (x_next[3], [tension, altitude, w_ap, px, py, pz] at x_next)``,
+        """``step_py(x, delta, p, dt) -> (x_next[3], [tension, altitude, w_ap, px, py, pz, xdot[3]] at x_next)``,
         plain Python floats/lists; one RK4 step with the input held."""
         self.rhs_py = to_python(ca.Function("kite_rhs_py", [e.x, e.delta, e.p],
                                             ca.cse([e.rhs, ca.vertcat(e.w_ap, e.wind)])))
