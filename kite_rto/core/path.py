@@ -1,0 +1,331 @@
+"""The reference figure-eight and its setpoints (SPEC §3).
+
+    theta_ref(s) = theta_0 + A_theta sin(2 s),    phi_ref(s) = A_phi sin(s),    s in [0, 2 pi)
+
+Geometry is on the unit sphere of the model's coordinates, in the local orthonormal frame
+``north = d theta`` (towards the zenith), ``east = sin(theta) d phi``. Angles and arc lengths are in rad;
+multiply by the tether length ``r`` for metres. The *course* ``chi = atan2(east, north)`` of a direction is
+measured from north towards east; a kite flying with ``delta``-free drift neglected has ``chi = -psi``.
+The geodesic curvature ``kappa`` (1/rad) is positive when the path turns towards increasing ``chi``; a kite
+follows it with ``w_ap g_s delta = -kappa * v`` (v in rad/s), i.e. ``delta = -kappa |d| / (r g_s)``.
+
+Sign of ``A_theta``: positive values fly *up* through the centre (s = 0 and pi, theta increasing) and turn
+downwards at the outer ends of the lobes; negative values fly the mirror pattern (down through the centre,
+turning upwards at the ends). Both are valid paths; :class:`SetpointBox` defaults to positive values only,
+so that the optimizer works in a convex box that stays away from the degenerate A_theta = 0 (a line).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from .params import KiteParams
+
+__all__ = ["Setpoints", "SetpointBox", "SetpointError", "FigureEightPath", "ClosestPoint",
+           "validate_setpoints", "required_turn_radius", "DEFAULT_SETPOINTS", "DEFAULT_TURN_MARGIN"]
+
+TWO_PI = 2.0 * math.pi
+
+
+class SetpointError(ValueError):
+    """Setpoints that the path controller refuses; the message names the field, the value and the reason."""
+
+
+@dataclass(frozen=True)
+class Setpoints:
+    """Shape of the figure-eight, rad.
+
+    Attributes:
+        theta_0: centre angle between tether and the downwind axis, rad.
+        A_phi: azimuth half-width, rad (> 0).
+        A_theta: elevation half-height, rad; its sign chooses the lobe direction (module docstring).
+    """
+
+    theta_0: float
+    A_phi: float
+    A_theta: float
+
+    def as_array(self) -> np.ndarray:
+        """``[theta_0, A_phi, A_theta]``, rad, shape (3,)."""
+        return np.array([self.theta_0, self.A_phi, self.A_theta], dtype=float)
+
+    @classmethod
+    def from_array(cls, c) -> "Setpoints":
+        """From a length-3 sequence ``[theta_0, A_phi, A_theta]`` (rad)."""
+        c = np.asarray(c, dtype=float).ravel()
+        if c.size != 3:
+            raise SetpointError(f"Setpoints.from_array: expected 3 values (theta_0, A_phi, A_theta), got {c.size}")
+        return cls(float(c[0]), float(c[1]), float(c[2]))
+
+    @classmethod
+    def from_degrees(cls, theta_0: float, A_phi: float, A_theta: float) -> "Setpoints":
+        """Convenience constructor from degrees."""
+        return cls(math.radians(theta_0), math.radians(A_phi), math.radians(A_theta))
+
+    def degrees(self) -> tuple:
+        """``(theta_0, A_phi, A_theta)`` in degrees."""
+        return tuple(math.degrees(v) for v in (self.theta_0, self.A_phi, self.A_theta))
+
+    @staticmethod
+    def names() -> list[str]:
+        return [f.name for f in fields(Setpoints)]
+
+
+DEFAULT_SETPOINTS = Setpoints.from_degrees(35.0, 45.0, 7.0)
+"""Default operating point (rad): wide figure-eight near the real kite's optimum, trackable with margin."""
+
+
+@dataclass(frozen=True)
+class SetpointBox:
+    """Bounds (rad) of the setpoints the controller accepts.
+
+    The Lissajous figure has two tight turns: at the lobe ends (radius about ``4 A_theta^2 / (sin theta_0 A_phi)``)
+    and at the tops/bottoms of the lobes (about ``(sin theta_0 A_phi)^2 / (8 A_theta)``), in rad of arc; the
+    exact tightest radius lies between them (:meth:`FigureEightPath.min_turn_radius`). Narrow, flat or tall
+    figures are therefore untrackable. A first guess (theta_0 in [18, 40] deg, A_phi in [10, 50] deg,
+    A_theta in [2, 12] deg) is mostly infeasible: it asks for radii down to 2 m while the nominal kite's
+    minimum radius is 1/g_s = 25 m (the model optimum quoted in SPEC §2, (22, 15, 4) deg, needs 4.6 m).
+    The feasible set is a thin band ``A_theta ~ sqrt(sin theta_0 A_phi)``, not a box; the default box is
+    the largest simple box found whose 8 corners all pass :func:`validate_setpoints` with the default
+    ``margin`` (tightest corner: 26.7 m at (30, 40, 7.5) deg):
+    theta_0 in [30, 40] deg, A_phi in [40, 50] deg, A_theta in [6, 7.5] deg (positive: up through the centre).
+    Interior points can still be infeasible (non-convex band); :func:`validate_setpoints` checks every point.
+    """
+
+    theta_0: tuple = (math.radians(30.0), math.radians(40.0))
+    A_phi: tuple = (math.radians(40.0), math.radians(50.0))
+    A_theta: tuple = (math.radians(6.0), math.radians(7.5))
+
+    def __post_init__(self):
+        for name in Setpoints.names():
+            lo, hi = getattr(self, name)
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+                raise SetpointError(f"SetpointBox.{name} = {(lo, hi)!r}: expected finite bounds with low <= high")
+        if self.A_phi[0] <= 0.0:
+            raise SetpointError(f"SetpointBox.A_phi = {self.A_phi!r}: the lower bound must be > 0")
+        if self.theta_0[0] - max(abs(v) for v in self.A_theta) <= 0.0 or self.theta_0[1] >= math.pi / 2:
+            raise SetpointError(f"SetpointBox.theta_0 = {self.theta_0!r}: the path must stay within (0, 90) deg")
+
+    def lower(self) -> np.ndarray:
+        return np.array([self.theta_0[0], self.A_phi[0], self.A_theta[0]])
+
+    def upper(self) -> np.ndarray:
+        return np.array([self.theta_0[1], self.A_phi[1], self.A_theta[1]])
+
+    def corners(self) -> list[Setpoints]:
+        """The 8 corners of the box."""
+        return [Setpoints(a, b, c) for a in self.theta_0 for b in self.A_phi for c in self.A_theta]
+
+    def centre(self) -> Setpoints:
+        return Setpoints.from_array((self.lower() + self.upper()) / 2)
+
+
+@dataclass(frozen=True)
+class ClosestPoint:
+    """Closest path point to a measured position.
+
+    Attributes:
+        s: path parameter, in [0, 2 pi).
+        theta, phi: the path point, rad.
+        cross_track: signed distance, rad of arc; positive when the kite lies on the side of increasing course
+            (to the east of a path heading north).
+        course: course angle of the path tangent at s, rad.
+    """
+
+    s: float
+    theta: float
+    phi: float
+    cross_track: float
+    course: float
+
+
+class FigureEightPath:
+    """The figure-eight of :class:`Setpoints` ``c``. All methods take scalar ``s`` (floats, fast) unless noted."""
+
+    def __init__(self, setpoints: Setpoints):
+        self.setpoints = setpoints
+        self._t0, self._ap, self._at = setpoints.theta_0, setpoints.A_phi, setpoints.A_theta
+
+    # --- geometry ----------------------------------------------------------------------------
+    def point(self, s):
+        """``(theta, phi)`` at ``s`` (rad); NumPy arrays accepted."""
+        if isinstance(s, np.ndarray):
+            return self._t0 + self._at * np.sin(2 * s), self._ap * np.sin(s)
+        return self._t0 + self._at * math.sin(2 * s), self._ap * math.sin(s)
+
+    def derivative(self, s: float):
+        """``(d theta/ds, d phi/ds)``."""
+        return 2 * self._at * math.cos(2 * s), self._ap * math.cos(s)
+
+    def _local(self, s: float):
+        """north/east components of dP/ds and d2P/ds2 (second derivative of the components)."""
+        th = self._t0 + self._at * math.sin(2 * s)
+        dth, dph = 2 * self._at * math.cos(2 * s), self._ap * math.cos(s)
+        ddth, ddph = -4 * self._at * math.sin(2 * s), -self._ap * math.sin(s)
+        st, ct = math.sin(th), math.cos(th)
+        return th, st, ct, dth, dph, ddth, ddph, dth, st * dph, ddth, ct * dth * dph + st * ddph
+
+    def speed(self, s: float) -> float:
+        """Arc-length rate ``|dP/ds|`` (rad of arc per unit of s)."""
+        th = self._t0 + self._at * math.sin(2 * s)
+        return math.hypot(2 * self._at * math.cos(2 * s), math.sin(th) * self._ap * math.cos(s))
+
+    def tangent(self, s: float):
+        """Unit tangent ``(north, east)`` in the direction of increasing s."""
+        th = self._t0 + self._at * math.sin(2 * s)
+        n, e = 2 * self._at * math.cos(2 * s), math.sin(th) * self._ap * math.cos(s)
+        v = math.hypot(n, e)
+        return n / v, e / v
+
+    def course(self, s: float) -> float:
+        """Course ``chi = atan2(east, north)`` of the tangent, rad."""
+        th = self._t0 + self._at * math.sin(2 * s)
+        return math.atan2(math.sin(th) * self._ap * math.cos(s), 2 * self._at * math.cos(2 * s))
+
+    def curvature(self, s: float) -> float:
+        """Geodesic curvature on the sphere, 1/rad (signed, positive towards increasing course)."""
+        th, st, ct, dth, dph, ddth, ddph, n, e, dn, de = self._local(s)
+        v2 = n * n + e * e
+        dchi = (n * de - e * dn) / v2
+        return (dchi + ct * dph) / math.sqrt(v2)
+
+    def turn_radius(self, s: float, r: float) -> float:
+        """Radius of the turn at s, m, for a tether of length r (m); inf on straight stretches."""
+        k = abs(self.curvature(s))
+        return r / k if k > 0 else math.inf
+
+    def max_curvature(self, n: int = 720) -> tuple:
+        """``(max |kappa| 1/rad, s where it occurs)`` from a grid of n points refined by a parabola."""
+        s = np.arange(n) * (TWO_PI / n)
+        k = np.abs([self.curvature(si) for si in s])
+        i = int(np.argmax(k))
+        km, k0, kp = k[i - 1], k[i], k[(i + 1) % n]
+        den = km - 2 * k0 + kp
+        ds = 0.5 * (km - kp) / den if den < 0 else 0.0
+        si = (s[i] + ds * TWO_PI / n) % TWO_PI
+        return max(k0, abs(self.curvature(si))), si
+
+    def min_turn_radius(self, r: float) -> float:
+        """Tightest turn radius of the path, m, for a tether of length r (m)."""
+        return r / self.max_curvature()[0]
+
+    def length(self, n: int = 720) -> float:
+        """Arc length of one lap, rad (times r for metres)."""
+        return float(sum(self.speed(si) for si in np.arange(n) * (TWO_PI / n)) * TWO_PI / n)
+
+    # --- closest point -------------------------------------------------------------------------
+    def _residual(self, s: float, theta: float, phi: float):
+        """Distance terms in the local metric at s: (d theta, sin(theta) d phi) and their s-derivatives."""
+        th, st, ct, dth, dph, ddth, ddph, *_ = self._local(s)
+        ph = self._ap * math.sin(s)
+        dn, de = theta - th, st * (phi - ph)
+        # derivative of (dn, de) with respect to s
+        ddn = -dth
+        dde = ct * dth * (phi - ph) - st * dph
+        return dn, de, ddn, dde, th, ph, st, ct, dth, dph, ddth, ddph
+
+    def _refine(self, s: float, theta: float, phi: float, iters: int = 4) -> float:
+        """Gauss-Newton on ``|(dn, de)|^2`` from s, step limited to 0.3."""
+        for _ in range(iters):
+            dn, de, ddn, dde, *_ = self._residual(s, theta, phi)
+            g = dn * ddn + de * dde
+            h = ddn * ddn + dde * dde
+            if h <= 0.0:
+                break
+            step = max(-0.3, min(0.3, -g / h))
+            s += step
+            if abs(step) < 1e-10:
+                break
+        return s % TWO_PI
+
+    def closest_point(self, theta: float, phi: float, s_guess: float | None = None,
+                      window: tuple = (-0.6, 0.9), n_grid: int = 64) -> ClosestPoint:
+        """Closest path point to ``(theta, phi)`` (rad).
+
+        Without ``s_guess``: a global grid of ``n_grid`` points then Gauss-Newton. With ``s_guess`` (the last
+        result, for a kite flying the path): only s in ``s_guess + window`` is searched (a small grid then
+        Gauss-Newton), so the crossing at the centre of the eight never makes s jump to the other branch.
+        """
+        if s_guess is None:
+            grid = np.arange(n_grid) * (TWO_PI / n_grid)
+        else:
+            grid = s_guess + np.linspace(window[0], window[1], 16)
+        th, ph = self.point(grid)
+        d2 = (theta - th) ** 2 + (np.sin(0.5 * (theta + th)) * (phi - ph)) ** 2
+        s0 = float(grid[int(np.argmin(d2))])
+        s = self._refine(s0, theta, phi)
+        if s_guess is not None:  # stay inside the window (the refinement may leave it near the centre)
+            rel = (s - s_guess + math.pi) % TWO_PI - math.pi
+            if not (window[0] - 0.05 <= rel <= window[1] + 0.05):
+                s = s0 % TWO_PI
+        return self._closest(s, theta, phi)
+
+    def track(self, theta: float, phi: float, s_prev: float) -> ClosestPoint:
+        """Fast per-sample closest point, warm-started from ``s_prev`` (Gauss-Newton only, no grid)."""
+        s = self._refine(s_prev, theta, phi, iters=3)
+        rel = (s - s_prev + math.pi) % TWO_PI - math.pi
+        if abs(rel) > 0.5:  # lost (large jump): fall back to the windowed search
+            return self.closest_point(theta, phi, s_guess=s_prev)
+        return self._closest(s, theta, phi)
+
+    def _closest(self, s: float, theta: float, phi: float) -> ClosestPoint:
+        dn, de, _, _, th, ph, st, _, dth, dph, _, _ = self._residual(s, theta, phi)
+        n, e = dth, st * dph
+        v = math.hypot(n, e)
+        # normal to the left of north->east rotation: (-e, n)/v in (north, east)
+        cross = (-dn * e + de * n) / v
+        return ClosestPoint(s, th, ph, cross, math.atan2(e, n))
+
+
+DEFAULT_TURN_MARGIN = 0.95
+"""Fraction of delta_max the tightest turn may need (nominal model). Measured (benchmarks/bench_tracking.py):
+paths down to ~24 m radius track within 0.25 deg RMS with turbulence, because the curvature peak is short;
+0.7 would leave almost no feasible figure-eight of this family."""
+
+
+def required_turn_radius(model_params: KiteParams, delta_max: float = 1.0,
+                         margin: float = DEFAULT_TURN_MARGIN) -> float:
+    """Smallest path radius (m) the controller accepts: ``1 / (g_s delta_max margin)``.
+
+    The kite turns at ``psi' = w_ap g_s delta`` while flying at about ``w_ap`` m/s, so its minimum turn radius
+    ``1 / (g_s delta)`` does not depend on the wind; ``margin`` keeps steering in reserve for disturbances.
+    """
+    return 1.0 / (model_params.g_s * delta_max * margin)
+
+
+def validate_setpoints(c, box: SetpointBox | None = None, model_params: KiteParams | None = None, *,
+                       delta_max: float = 1.0, margin: float = DEFAULT_TURN_MARGIN) -> Setpoints:
+    """Return ``c`` as :class:`Setpoints` if it is finite, inside ``box`` and trackable; else raise
+    :class:`SetpointError` naming the field, the value and the reason.
+
+    Args:
+        c: :class:`Setpoints` or a length-3 sequence (rad).
+        box: :class:`SetpointBox` (default bounds if None).
+        model_params: the controller's model (nominal :class:`KiteParams` if None); uses ``r`` and ``g_s``.
+        delta_max: steering limit of the controller (normalized).
+        margin: fraction of ``delta_max`` the tightest turn may need.
+    """
+    box = box or SetpointBox()
+    model_params = model_params or KiteParams()
+    if not isinstance(c, Setpoints):
+        try:
+            c = Setpoints.from_array(c)
+        except (TypeError, ValueError) as err:
+            raise SetpointError(f"setpoints {c!r}: {err}") from None
+    for name in Setpoints.names():
+        v = getattr(c, name)
+        if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+            raise SetpointError(f"setpoint {name} = {v!r}: expected a finite number (rad)")
+        lo, hi = getattr(box, name)
+        if not lo <= v <= hi:
+            raise SetpointError(f"setpoint {name} = {v:.6g} rad ({math.degrees(v):.3g} deg): outside the box "
+                                f"[{lo:.6g}, {hi:.6g}] rad ([{math.degrees(lo):.3g}, {math.degrees(hi):.3g}] deg)")
+    r_req = required_turn_radius(model_params, delta_max, margin)
+    r_path = FigureEightPath(c).min_turn_radius(model_params.r)
+    if r_path < r_req:
+        raise SetpointError(
+            f"setpoints {tuple(round(d, 2) for d in c.degrees())} deg: infeasible turn, tightest path radius "
+            f"{r_path:.1f} m < {r_req:.1f} m = 1/(g_s {model_params.g_s:g} * delta_max {delta_max:g} * margin {margin:g})")
+    return c

@@ -1,0 +1,193 @@
+"""Plant node: simulates the real kite, owns the simulation clock, publishes measurements, takes steering.
+
+Modes: ``lockstep`` publishes sample k and advances only when the steering command stamped with sample k's time
+arrives (deterministic, as fast as the loop allows; a lost message is recovered by re-publishing the sample);
+``realtime`` advances at wall-clock pace times ``rate_factor`` with a zero-order hold on the last command.
+Without commands for ``command_timeout`` seconds (wall clock) the kite flies neutral (delta = 0) and says so.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+
+from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import JointState
+
+from ..core.params import KiteParams
+from ..core.plant import PLANT_PARAMS, KitePlant, NoiseSettings, PlantConfig
+from ..core.wind import TurbulenceSettings
+from .common import RELIABLE_10, ParamSpec, declare_params, finite_floats, ns_to_stamp, run_node, stamp_to_ns
+from .topics import CLOCK, POSITION, STATE, STEERING, TENSION, WIND
+
+__all__ = ["PlantNode", "PARAMS", "main"]
+
+_P = PLANT_PARAMS
+PARAMS = (
+    ParamSpec("mode", "lockstep", "lockstep (deterministic, fast) or realtime (wall clock x rate_factor)",
+              choices=("lockstep", "realtime")),
+    ParamSpec("rate_factor", 1.0, "realtime mode: simulated seconds per wall second", 0.01, 100.0),
+    ParamSpec("seed", 0, "seed of turbulence and measurement noise", 0, 2**31 - 1),
+    ParamSpec("duration", 0.0, "simulated seconds after which the node exits (0 = run until stopped)", 0.0, 1e7),
+    ParamSpec("dt", 0.02, "sample time, s", 0.001, 0.1),
+    ParamSpec("substeps", 1, "RK4 steps per sample", 1, 100),
+    ParamSpec("dead_time", 0.25, "steering dead time, s", 0.0, 5.0),
+    ParamSpec("rate_limit", 5.0, "steering rate limit, 1/s (normalized delta)", 0.01, 1000.0),
+    ParamSpec("r", _P.r, "tether length, m", 1.0, 5000.0),
+    ParamSpec("area", _P.area, "kite area, m^2", 0.1, 5000.0),
+    ParamSpec("rho", _P.rho, "air density, kg/m^3", 0.1, 2.0),
+    ParamSpec("E", _P.E, "glide ratio of the real kite", 0.5, 30.0),
+    ParamSpec("c_E", _P.c_E, "glide loss when steering: E - c_E delta^2", 0.0, 30.0),
+    ParamSpec("g_s", _P.g_s, "turning constant, rad/m", 0.001, 1.0),
+    ParamSpec("w_ref", _P.w_ref, "mean wind at z_ref, m/s", 0.5, 40.0),
+    ParamSpec("z_ref", _P.z_ref, "reference height of the wind profile, m", 0.5, 200.0),
+    ParamSpec("shear", _P.shear, "wind shear exponent", 0.0, 1.0),
+    ParamSpec("turbulence", True, "turbulence on the reference wind"),
+    ParamSpec("turbulence_intensity", 0.14, "gust std / mean wind", 0.0, 1.0),
+    ParamSpec("turbulence_length", 100.0, "turbulence length scale L_W, m", 1.0, 10000.0),
+    ParamSpec("noise_angle_deg", 0.1, "angle measurement noise std, deg", 0.0, 10.0),
+    ParamSpec("noise_rate", 0.005, "angular-rate measurement noise std, rad/s", 0.0, 1.0),
+    ParamSpec("noise_tension", 0.01, "relative tension noise std", 0.0, 1.0),
+    ParamSpec("launch_theta_deg", 30.0, "theta after launch and after a crash, deg", 1.0, 89.0),
+    ParamSpec("command_timeout", 1.0, "wall seconds without steering before flying neutral", 0.01, 60.0),
+    ParamSpec("resend_period", 0.2, "lockstep: wall seconds before an unanswered sample is re-published", 0.005, 10.0),
+)
+
+
+def config_from_params(v: dict) -> PlantConfig:
+    """Build the plant configuration from checked parameter values (raises ParameterError)."""
+    params = KiteParams(**{k: v[k] for k in ("r", "area", "rho", "E", "c_E", "g_s", "w_ref", "z_ref", "shear")})
+    turb = replace(TurbulenceSettings(), enabled=v["turbulence"], intensity=v["turbulence_intensity"],
+                   length_scale=v["turbulence_length"])
+    noise = NoiseSettings(math.radians(v["noise_angle_deg"]), v["noise_rate"], v["noise_tension"])
+    return PlantConfig(params=params, dt=v["dt"], substeps=v["substeps"], dead_time=v["dead_time"],
+                       rate_limit=v["rate_limit"], turbulence=turb, noise=noise,
+                       launch_state=(math.radians(v["launch_theta_deg"]), 0.0, 0.0))
+
+
+class PlantNode(Node):
+    """Publishes /clock and the kite's measurements; subscribes /kite/steering."""
+
+    def __init__(self, **kwargs):
+        super().__init__("plant", **kwargs)
+        self.p = declare_params(self, PARAMS)
+        self.plant = KitePlant(config_from_params(self.p), seed=self.p["seed"])
+        self._dt_ns = round(self.p["dt"] * 1e9)
+        self._lockstep = self.p["mode"] == "lockstep"
+        self._end_step = round(self.p["duration"] / self.p["dt"]) if self.p["duration"] > 0 else None
+        self.pub_clock = self.create_publisher(ClockMsg, CLOCK, 10)
+        self.pub_state = self.create_publisher(JointState, STATE, RELIABLE_10)
+        self.pub_position = self.create_publisher(PointStamped, POSITION, RELIABLE_10)
+        self.pub_tension = self.create_publisher(WrenchStamped, TENSION, RELIABLE_10)
+        self.pub_wind = self.create_publisher(Vector3Stamped, WIND, RELIABLE_10)
+        self.create_subscription(JointState, STEERING, self.steering_callback, RELIABLE_10)
+        self._delta = 0.0                 # last valid command (realtime zero-order hold)
+        self._last_command = time.monotonic()
+        self._last_publish = time.monotonic()
+        self._neutral = False
+        self._crashes = 0
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        if self._lockstep:
+            self.create_timer(min(0.05, self.p["resend_period"]), self.watchdog_callback, clock=steady)
+        else:
+            self.create_timer(self.p["dt"] / self.p["rate_factor"], self.realtime_callback, clock=steady)
+        self.publish_sample()
+        self.get_logger().info(f"plant up: mode={self.p['mode']} dt={self.p['dt']} s seed={self.p['seed']}")
+
+    # -------------------------------------------------------------- callbacks
+    def steering_callback(self, msg: JointState) -> None:
+        values = finite_floats(msg.position, 1)
+        if values is None or abs(values[0]) > 1.0:
+            self.get_logger().warning(f"rejected steering {list(msg.position)!r}: expected one finite delta in "
+                                      "[-1, 1]", throttle_duration_sec=2.0)
+            return
+        stamp = stamp_to_ns(msg.header.stamp)
+        now = self.plant.k * self._dt_ns
+        if self._lockstep:
+            if stamp != now:
+                return                     # an answer to an earlier sample (duplicate or late): ignore
+        elif stamp > now or now - stamp > max(5 * self._dt_ns, round(0.5e9)):
+            self.get_logger().warning(f"rejected steering stamped {stamp * 1e-9:.3f} s at sim time "
+                                      f"{now * 1e-9:.3f} s (stale or future)", throttle_duration_sec=2.0)
+            return
+        self._delta = values[0]
+        self._command_received()
+        if self._lockstep:
+            self.advance(self._delta)
+
+    def watchdog_callback(self) -> None:
+        """Lockstep: re-publish an unanswered sample; fly neutral when commands stop."""
+        now = time.monotonic()
+        if now - self._last_command > self.p["command_timeout"]:
+            self._fly_neutral()
+            self.advance(0.0)
+        elif now - self._last_publish > self.p["resend_period"]:
+            self.publish_sample()
+
+    def realtime_callback(self) -> None:
+        if time.monotonic() - self._last_command > self.p["command_timeout"]:
+            self._fly_neutral()
+            self._delta = 0.0
+        self.advance(self._delta)
+
+    # ---------------------------------------------------------------- helpers
+    def advance(self, delta: float) -> None:
+        m = self.plant.step(delta)
+        if m.crashes != self._crashes:
+            self._crashes = m.crashes
+            self.get_logger().error(f"kite crashed at t = {m.t:.2f} s (crash #{m.crashes}): relaunched")
+        self.publish_sample()
+        if self._end_step is not None and self.plant.k >= self._end_step:
+            self.get_logger().info(f"duration reached at t = {m.t:.2f} s; crashes: {m.crashes}")
+            raise SystemExit(0)
+
+    def _command_received(self) -> None:
+        self._last_command = time.monotonic()
+        if self._neutral:
+            self._neutral = False
+            self.get_logger().info("steering commands are back")
+
+    def _fly_neutral(self) -> None:
+        if not self._neutral:
+            self._neutral = True
+            self.get_logger().warning(f"no steering command for {self.p['command_timeout']} s: flying neutral "
+                                      "(delta = 0)")
+
+    def publish_sample(self) -> None:
+        """Publish /clock and every measurement of the current sample, all stamped with its sim time."""
+        m = self.plant.measure()
+        stamp = ns_to_stamp(self.plant.k * self._dt_ns)
+        self.pub_clock.publish(ClockMsg(clock=stamp))
+        s = JointState()
+        s.header.stamp = stamp
+        s.header.frame_id = "anchor"
+        s.name = ["theta", "phi", "psi"]
+        s.position = [m.theta, m.phi, m.psi]
+        s.velocity = [m.theta_dot, m.phi_dot, m.psi_dot]
+        p = PointStamped()
+        p.header = s.header
+        p.point.x, p.point.y, p.point.z = m.position
+        w = WrenchStamped()
+        w.header.stamp = stamp
+        w.header.frame_id = "tether"
+        w.wrench.force.x = m.tension
+        v = Vector3Stamped()
+        v.header.stamp = stamp
+        v.header.frame_id = "anchor"
+        v.vector.x = m.wind_ref
+        self.pub_tension.publish(w)
+        self.pub_position.publish(p)
+        self.pub_wind.publish(v)
+        self.pub_state.publish(s)          # last: in lockstep its arrival means the sample is complete
+        self._last_publish = time.monotonic()
+
+
+def main(args=None) -> None:
+    raise SystemExit(run_node(PlantNode, args))
+
+
+if __name__ == "__main__":
+    main()

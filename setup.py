@@ -1,0 +1,29 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "kite_rto"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*", "benchmarks"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/config", glob("config/*.yaml")),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="kite_rto developers",
+    maintainer_email="kite_rto@example.com",
+    description="Real-time optimization of a crosswind power kite (GMA) as ROS 2 nodes",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "plant = kite_rto.nodes.plant_node:main",
+            "echo_pilot = kite_rto.nodes.echo_pilot:main",
+        ],
+    },
+)
