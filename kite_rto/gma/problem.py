@@ -69,6 +69,7 @@ class ModelProblem:
     inner_constraints: ca.SX | ca.MX | None = None
     name: str = "model"
     _fun: ca.Function = field(init=False, repr=False, compare=False)
+    _jac: ca.Function = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         if not isinstance(self.u, (ca.SX, ca.MX)) or not self.u.is_valid_input():
@@ -100,6 +101,12 @@ class ModelProblem:
         self._fun = ca.Function(
             f"{self.name}_eval", [self.u], [self.cost, self.constraints, self.outputs],
             ["u"], ["phi", "g", "y"])
+        u = self.u
+        self._jac = ca.Function(
+            f"{self.name}_jac", [u],
+            [ca.jacobian(self.cost, u), ca.jacobian(self.constraints, u), ca.jacobian(self.outputs, u),
+             ca.jacobian(self.equalities, u), ca.jacobian(self.inner_constraints, u), self.inner_constraints],
+            ["u"], ["dphi", "dg", "dy", "dh", "dgin", "gin"])
 
     @property
     def n_u(self) -> int:
@@ -125,3 +132,29 @@ class ModelProblem:
         """Evaluate the model at ``u``: returns ``(phi, g (n_g,), y (n_c,))``."""
         phi, g, y = self._fun(np.asarray(u, dtype=float))
         return float(phi), np.asarray(g, dtype=float).ravel(), np.asarray(y, dtype=float).ravel()
+
+    def jacobians(self, u) -> dict[str, np.ndarray]:
+        """Dense Jacobians at ``u``: ``dphi`` (1, n_u), ``dg`` (n_g, n_u), ``dy`` (n_c, n_u), ``dh`` (n_h, n_u),
+        ``dgin`` (n_in, n_u), and the inner-constraint values ``gin`` (n_in,)."""
+        out = self._jac(np.asarray(u, dtype=float))
+        names = ("dphi", "dg", "dy", "dh", "dgin", "gin")
+        res = {n: np.asarray(ca.DM(v).full(), dtype=float) for n, v in zip(names, out)}
+        res["gin"] = res["gin"].ravel()
+        return res
+
+    def tangent_right_inverse(self, u, tol: float = 1e-7) -> np.ndarray:
+        """A right inverse ``R`` (n_u, n_c) of ``dy/du`` inside the tangent space of the model-internal
+        constraints active at ``u`` (equalities, active inner constraints, active bounds):
+        ``dy R = I``, ``dh R = 0``, ``dgin_active R = 0``, ``R[i] = 0`` for bounded ``u_i``. Minimum norm.
+        ``grad_u f(u) R`` is then the gradient of ``f`` with respect to the setpoints along the model."""
+        u = np.asarray(u, dtype=float)
+        J = self.jacobians(u)
+        rows = [J["dy"], J["dh"], J["dgin"][J["gin"] >= -tol * (1 + np.abs(J["gin"]))]]
+        at_bound = (np.abs(u - self.lbu) <= tol * (1 + np.abs(self.lbu))) | \
+                   (np.abs(u - self.ubu) <= tol * (1 + np.abs(self.ubu)))
+        rows.append(np.eye(self.n_u)[at_bound])
+        M = np.vstack(rows)
+        E = np.zeros((M.shape[0], self.n_c))
+        E[: self.n_c] = np.eye(self.n_c)
+        R, *_ = np.linalg.lstsq(M, E, rcond=None)
+        return R

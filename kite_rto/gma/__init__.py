@@ -1,0 +1,17 @@
+"""Generalized Modifier Adaptation (GMA): a generic real-time optimization core.
+
+Plant and model may have different inputs: the plant takes setpoints ``c``, the model takes ``u`` and
+predicts the controlled variables ``y(u)``. With ``y(u) = u`` this is standard Modifier Adaptation.
+The core knows nothing about kites and never imports ``rclpy``. See ``docs/gma.md``.
+"""
+from .gma import GMA, ModelRealization
+from .gradients import (FiniteDifferenceGradient, GradientEstimate, GradientEstimator, LeastSquaresGradient,
+                        PlantPoint)
+from .offline import run_offline
+from .problem import ModelProblem
+from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
+from .settings import GMASettings
+
+__all__ = ["ModelProblem", "GMASettings", "GMA", "ModelRealization", "GradientEstimator", "GradientEstimate",
+           "PlantPoint", "FiniteDifferenceGradient", "LeastSquaresGradient", "ExperimentRequest",
+           "ExperimentResult", "IterationRecord", "History", "run_offline"]

@@ -1,0 +1,317 @@
+"""Generalized Modifier Adaptation: the iteration, driven by experiment requests and results.
+
+The core never calls the plant. It asks for experiments (:meth:`GMA.next_request`) and is told their results
+(:meth:`GMA.submit`). When all experiments of iteration ``k`` are in, it estimates the plant gradients,
+computes the modifiers from the model's best realization of ``c_k``, solves the modified problem, filters
+the step and records an :class:`IterationRecord`.
+"""
+from __future__ import annotations
+
+import time
+from copy import deepcopy
+
+import numpy as np
+
+from ._nlp import ModifiedNLP, RealizationNLP
+from .gradients import FiniteDifferenceGradient, GradientEstimator, PlantPoint
+from .problem import ModelProblem
+from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
+from .settings import GMASettings, per_setpoint
+
+__all__ = ["GMA", "ModelRealization"]
+
+
+class ModelRealization:
+    """The model's best realization of setpoints ``c`` and its gradients with respect to ``c``.
+
+    Attributes: ``u`` (n_u,), ``phi`` (scalar), ``g`` (n_g,), ``grad_phi`` (n_c,) from the multipliers of
+    ``y(u) = c``, ``jac_g`` (n_g, n_c) from central differences of warm-started re-solves, ``success``,
+    ``status``.
+    """
+
+    def __init__(self, u, phi, g, grad_phi, jac_g, success, status):
+        self.u, self.phi, self.g, self.grad_phi, self.jac_g = u, phi, g, grad_phi, jac_g
+        self.success, self.status = success, status
+
+
+class GMA:
+    """Generalized Modifier Adaptation on a :class:`ModelProblem`, through requests and results.
+
+    Args:
+        problem: the open-loop model with controlled variables ``y(u)`` and the setpoint box.
+        settings: :class:`GMASettings` (defaults if ``None``).
+        gradient: plant-gradient strategy (default: forward differences with 1 % of the box width).
+        c0: initial setpoints (n_c,); default: ``y(u)`` at the model optimum. Ignored when resuming.
+        history: a :class:`History` to resume from; finished experiments are not requested again.
+    """
+
+    def __init__(self, problem: ModelProblem, settings: GMASettings | None = None,
+                 gradient: GradientEstimator | None = None, c0=None, history: History | None = None):
+        self.problem = problem
+        self.settings = settings if settings is not None else GMASettings()
+        s, n_c, n_g = self.settings, problem.n_c, problem.n_g
+        self._width = problem.c_width
+        self._K = per_setpoint("filter_gain", s.filter_gain, n_c)
+        self._radius0 = per_setpoint("trust_radius", s.trust_radius, n_c)
+        self._max_step = per_setpoint("max_step", s.max_step, n_c) * self._width
+        self._q = per_setpoint("convexification", s.convexification, n_c)
+        self._backoff = per_setpoint("backoff", s.backoff, n_g) if n_g else np.zeros(0)
+        self.gradient = gradient if gradient is not None else FiniteDifferenceGradient(0.01 * self._width)
+        self.realization_nlp = RealizationNLP(problem, s)
+        self.modified_nlp = ModifiedNLP(problem, s)
+        if history is not None:
+            self.history = deepcopy(history)
+            self._resume()
+        else:
+            c0 = self.model_optimum() if c0 is None else np.asarray(c0, float).ravel()
+            if c0.size != n_c:
+                raise ValueError(f"GMA: c0 has {c0.size} entries, expected n_c={n_c}")
+            if np.any(c0 < problem.c_lb) or np.any(c0 > problem.c_ub):
+                raise ValueError(f"GMA: c0={c0.tolist()} outside the setpoint box")
+            self.history = History(c0=c0.copy(), meta={"problem": problem.name, "n_u": problem.n_u,
+                                                        "n_c": n_c, "n_g": n_g, "settings": s.to_dict()})
+            self._k, self._c = 0, c0.copy()
+            self._radius, self._prev_step = self._radius0.copy(), np.zeros(n_c)
+            self._prev_mod = (c0.copy(), np.zeros(n_g), np.zeros((n_g, n_c)), self._backoff.copy())
+            self._plan()
+
+    # ------------------------------------------------------------------ public interface
+    @property
+    def k(self) -> int:
+        """Index of the open iteration (= number of completed iterations)."""
+        return self._k
+
+    @property
+    def c(self) -> np.ndarray:
+        """Current operating point ``c_k`` (n_c,)."""
+        return self._c.copy()
+
+    @property
+    def records(self) -> list[IterationRecord]:
+        """Completed iterations."""
+        return self.history.iterations
+
+    @property
+    def converged(self) -> bool:
+        """True if the last completed iteration met ``tol_c``."""
+        return bool(self.records and self.records[-1].converged)
+
+    def pending_requests(self) -> list[ExperimentRequest]:
+        """Requests of the open iteration that have not been submitted yet, in order."""
+        done = self.history.finished_ids()
+        return [deepcopy(q) for q in self.history.pending if q.request_id not in done]
+
+    def next_request(self) -> ExperimentRequest | None:
+        """The next experiment to run; the same request until it is submitted (``None`` never happens in
+        normal operation, since a new iteration is planned as soon as one completes)."""
+        todo = self.pending_requests()
+        return todo[0] if todo else None
+
+    def submit(self, result: ExperimentResult) -> IterationRecord | None:
+        """Record a finished experiment. Returns the :class:`IterationRecord` if it completed the iteration.
+
+        Raises ``ValueError`` for an unknown or already submitted ``request_id``, or a result of the wrong size.
+        """
+        rid = result.request_id
+        if rid in self.history.finished_ids():
+            raise ValueError(f"GMA.submit: experiment {rid!r} was already submitted")
+        req = next((q for q in self.history.pending if q.request_id == rid), None)
+        if req is None:
+            raise ValueError(f"GMA.submit: unknown request_id {rid!r}; pending: "
+                             f"{[q.request_id for q in self.pending_requests()]}")
+        if result.constraints.size != self.problem.n_g:
+            raise ValueError(f"GMA.submit: result {rid!r} has {result.constraints.size} constraints, "
+                             f"expected n_g={self.problem.n_g}")
+        if not np.isfinite(result.cost) or not np.all(np.isfinite(result.constraints)):
+            raise ValueError(f"GMA.submit: result {rid!r} has non-finite measurements")
+        self.history.experiments.append((deepcopy(req), deepcopy(result)))
+        if self.pending_requests():
+            return None
+        return self._complete()
+
+    def model_optimum(self) -> np.ndarray:
+        """``y(u)`` at the model optimum inside the setpoint box (no modifiers, no trust region)."""
+        pr = self.problem
+        n_c, n_g = pr.n_c, pr.n_g
+        res = self.modified_nlp.solve(0.5 * (pr.c_lb + pr.c_ub), np.zeros(n_g), np.zeros(n_c),
+                                      np.zeros((n_g, n_c)), np.zeros(n_c), np.zeros(n_g),
+                                      np.full(n_c, np.inf), None, pr.u0)
+        if not res.success:
+            raise RuntimeError(f"GMA: the model optimization failed ({res.status}); pass c0 explicitly")
+        return np.clip(pr.evaluate(res.x[: pr.n_u])[2], pr.c_lb, pr.c_ub)
+
+    def realize(self, c) -> ModelRealization:
+        """The model's best realization of ``c`` (n_c,) and its gradients with respect to ``c``."""
+        pr = self.problem
+        c = np.asarray(c, float)
+        x0 = self.realization_nlp.last.x if self.realization_nlp.last is not None else pr.u0
+        res = self.realization_nlp.solve(c, x0)
+        jac = np.full((pr.n_g, pr.n_c), np.nan)
+        if not res.success:
+            return ModelRealization(res.x, res.f, np.full(pr.n_g, np.nan), np.full(pr.n_c, np.nan), jac,
+                                    False, res.status)
+        _, g, _ = pr.evaluate(res.x)
+        if pr.n_g:
+            jac = self._jac_g_hat(c, res)
+        return ModelRealization(res.x, res.f, g, self.realization_nlp.value_gradient(res), jac, True, res.status)
+
+    def linearize(self, c) -> ModelRealization:
+        """The model point and gradients used for the modifiers at ``c`` (see ``GMASettings.model_point``).
+
+        ``"consistent"``: ``u_k = argmin phi(u)`` s.t. ``y(u) = c`` and the previous iteration's modified
+        constraints (shifted to ``c``), gradients ``grad_u(.) R`` (see
+        :meth:`ModelProblem.tangent_right_inverse`); falls back to :meth:`realize` if that solve fails.
+        """
+        pr = self.problem
+        c = np.asarray(c, float)
+        if self.settings.model_point == "realization" or pr.n_g == 0:
+            return self.realize(c)
+        c_prev, eps_prev, mu_prev, b_prev = self._prev_mod
+        x0 = self.realization_nlp.last.x if self.realization_nlp.last is not None else pr.u0
+        res = self.modified_nlp.solve(c, eps_prev + mu_prev @ (c - c_prev), np.zeros(pr.n_c), mu_prev,
+                                      np.zeros(pr.n_c), b_prev, np.zeros(pr.n_c), self.settings.constraint_penalty,
+                                      x0)
+        if not res.success:
+            out = self.realize(c)
+            out.status = f"{out.status} (consistent point failed: {res.status})"
+            return out
+        u = res.x[: pr.n_u]
+        phi, g, _ = pr.evaluate(u)
+        J, R = pr.jacobians(u), pr.tangent_right_inverse(u)
+        return ModelRealization(u, phi, g, (J["dphi"] @ R).ravel(), J["dg"] @ R, True, res.status)
+
+    # ------------------------------------------------------------------ internals
+    def _jac_g_hat(self, c, base):
+        """Central differences of warm-started re-solves, ``h = model_fd_step * box width``; one-sided
+        where a re-solve fails."""
+        pr = self.problem
+        jac = np.full((pr.n_g, pr.n_c), np.nan)
+        g0 = pr.evaluate(base.x)[1]
+        for i in range(pr.n_c):
+            h = self.settings.model_fd_step * self._width[i]
+            vals = {}
+            for sgn in (1.0, -1.0):
+                cc = c.copy()
+                cc[i] += sgn * h
+                r = self.realization_nlp.solve(cc, base.x, keep=False)
+                if r.success:
+                    vals[sgn] = pr.evaluate(r.x)[1]
+            if len(vals) == 2:
+                jac[:, i] = (vals[1.0] - vals[-1.0]) / (2 * h)
+            elif vals:
+                sgn, gv = next(iter(vals.items()))
+                jac[:, i] = (gv - g0) / (sgn * h)
+        self.realization_nlp.last = base
+        return jac
+
+    def _points(self, exclude_iteration: int | None = None) -> list[PlantPoint]:
+        return [PlantPoint(q.c, r.cost, r.constraints, r.cost_std, r.constraints_std)
+                for q, r in self.history.experiments if q.iteration != exclude_iteration]
+
+    def _plan(self) -> None:
+        """Plan the experiments of iteration ``k``: the nominal point, then the strategy's perturbations."""
+        pr, s, k = self.problem, self.settings, self._k
+        past = self._points(exclude_iteration=k)
+        cs = [self._c.copy()] + [np.asarray(c, float) for c in self.gradient.plan(self._c, pr.c_lb, pr.c_ub, past)]
+        self.history.pending = [
+            ExperimentRequest(f"k{k}-{j}-{'nominal' if j == 0 else 'perturbation'}", c,
+                              "nominal" if j == 0 else "perturbation", k, s.settle_time, s.averaging)
+            for j, c in enumerate(cs)]
+
+    def _resume(self) -> None:
+        h, n_c, n_g = self.history, self.problem.n_c, self.problem.n_g
+        if h.iterations:
+            last = h.iterations[-1]
+            self._k, self._c = last.k + 1, last.c_next.copy()
+            self._radius, self._prev_step = last.trust_radius_next.copy(), last.step.copy()
+            if last.modified_status == "not solved" or not np.all(np.isfinite(last.u_star)):
+                prev = [r for r in h.iterations if np.all(np.isfinite(r.u_star))]
+                last = prev[-1] if prev else None
+            self._prev_mod = ((last.c_k.copy(), last.eps.copy(), last.mu.copy(), last.backoff.copy())
+                              if last is not None else (np.asarray(h.c0, float).copy(), np.zeros(n_g),
+                                                        np.zeros((n_g, n_c)), self._backoff.copy()))
+        else:
+            self._k, self._c = 0, np.asarray(h.c0, float).copy()
+            self._radius, self._prev_step = self._radius0.copy(), np.zeros(n_c)
+            self._prev_mod = (self._c.copy(), np.zeros(n_g), np.zeros((n_g, n_c)), self._backoff.copy())
+        if self._c.size != n_c:
+            raise ValueError(f"GMA: history has {self._c.size} setpoints, the problem has n_c={n_c}")
+        if not h.pending or h.pending[0].iteration != self._k:
+            self._plan()
+        elif not self.pending_requests():
+            self._complete()
+
+    def _complete(self) -> IterationRecord:
+        t0 = time.perf_counter()
+        pr, s, k, c_k = self.problem, self.settings, self._k, self._c.copy()
+        n_c, n_g = pr.n_c, pr.n_g
+        results = {q.request_id: (q, r) for q, r in self.history.experiments if q.iteration == k}
+        ordered = [results[q.request_id] for q in self.history.pending]
+        pts = [PlantPoint(q.c, r.cost, r.constraints, r.cost_std, r.constraints_std) for q, r in ordered]
+        nominal = pts[0]
+        est = self.gradient.estimate(c_k, nominal, pts[1:], self._points(exclude_iteration=k))
+        model = self.linearize(c_k)
+        notes = [est.notes] if est.notes else []
+        eps = nominal.constraints - model.g
+        lam = est.cost - model.grad_phi
+        mu = est.constraints - model.jac_g
+        radius_abs = self._radius * self._width
+        u_star, mod_cost, mod_status = np.full(pr.n_u, np.nan), np.nan, "not solved"
+        backoff = self._backoff.copy()
+        c_star = c_k.copy()
+        if not model.success:
+            decision = "hold: the model cannot realize c_k"
+            notes.append(f"realization status {model.status}")
+        elif not (np.all(np.isfinite(lam)) and np.all(np.isfinite(mu)) and est.quality > 0):
+            decision = "hold: unusable gradient estimate"
+        else:
+            if n_g and s.backoff_std_factor > 0 and nominal.constraints_std is not None:
+                backoff += s.backoff_std_factor * nominal.constraints_std
+            res = self.modified_nlp.solve(c_k, eps, lam, mu, self._q, backoff, radius_abs,
+                                          s.constraint_penalty, model.u)
+            mod_status, mod_cost = res.status, res.f
+            if res.success:
+                self._prev_mod = (c_k.copy(), eps.copy(), mu.copy(), backoff.copy())
+                u_star = res.x[: pr.n_u]
+                c_star = np.clip(pr.evaluate(u_star)[2], pr.c_lb, pr.c_ub)
+                at_bound = np.abs(c_star - c_k) >= 0.999 * radius_abs
+                decision = "step" + (f" (trust region active on c{np.flatnonzero(at_bound).tolist()})"
+                                     if at_bound.any() else "")
+                if n_g and res.x.size > pr.n_u and np.any(res.x[pr.n_u:] > 1e-8):
+                    notes.append("soft constraints violated in the modified problem")
+            else:
+                decision = "hold: the modified problem failed"
+                self._radius = np.maximum(self._radius * s.trust_shrink, s.trust_radius_min)
+        step = np.clip(self._K * (c_star - c_k), -self._max_step, self._max_step)
+        c_next = np.clip(c_k + step, pr.c_lb, pr.c_ub)
+        step = c_next - c_k
+        radius_used = self._radius.copy()
+        self._adapt_trust_region(step, c_star - c_k, radius_abs)
+        converged = decision.startswith("step") and bool(np.all(np.abs(step) <= s.tol_c * self._width))
+        if converged:
+            decision = "converged"
+        rec = IterationRecord(
+            k=k, c_k=c_k, cost=nominal.cost, constraints=nominal.constraints, grad_cost=est.cost,
+            jac_constraints=est.constraints.reshape(n_g, n_c), gradient_quality=est.quality,
+            gradient_method=est.method, phi_hat=model.phi, g_hat=model.g, grad_phi_hat=model.grad_phi,
+            jac_g_hat=model.jac_g, u_hat=model.u, model_status=model.status, eps=eps, lam=lam, mu=mu,
+            backoff=backoff, u_star=u_star, modified_cost=mod_cost, modified_status=mod_status, c_star=c_star, step=step,
+            c_next=c_next, trust_radius=radius_used, trust_radius_next=self._radius.copy(),
+            converged=converged, decision=decision, notes=notes, solve_time=time.perf_counter() - t0,
+            experiment_ids=[q.request_id for q, _ in ordered])
+        self.history.iterations.append(rec)
+        self._k, self._c = k + 1, c_next
+        if decision.startswith("step") or decision == "converged":
+            self._prev_step = step
+        self._plan()
+        return rec
+
+    def _adapt_trust_region(self, step, proposed, radius_abs) -> None:
+        """Per setpoint: shrink on a sign change of the step, grow when the bound was hit without one."""
+        s = self.settings
+        if not s.trust_adapt:
+            return
+        flip = step * self._prev_step < 0
+        hit = (np.abs(proposed) >= 0.999 * radius_abs) & ~flip
+        self._radius = np.where(flip, np.maximum(self._radius * s.trust_shrink, s.trust_radius_min), self._radius)
+        self._radius = np.where(hit, np.minimum(self._radius * s.trust_grow, self._radius0), self._radius)

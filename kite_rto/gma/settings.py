@@ -1,0 +1,161 @@
+"""Settings of the GMA iteration: filter, trust region, convexification, back-off, solver options.
+
+Distances in setpoint space (trust radius, step bound, convergence tolerance, model finite-difference step)
+are **relative to the width of the setpoint box** ``c_ub - c_lb`` of the :class:`~kite_rto.gma.ModelProblem`,
+so that one set of defaults works for setpoints of any unit. Per-setpoint values may be given as sequences of
+length ``n_c``; their length is checked when a :class:`~kite_rto.gma.GMA` is built.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+__all__ = ["GMASettings"]
+
+Scalar = float | Sequence[float]
+
+
+def _check(name: str, value, low=None, high=None, *, low_open=False, high_open=False, inf_ok=False):
+    """Raise ``ValueError`` naming field, value and range unless every entry of ``value`` is in range."""
+    entries = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+    lo = "(" if low_open else "["
+    hi = ")" if high_open else "]"
+    expected = f"{lo}{'-inf' if low is None else low}, {'inf' if high is None else high}{hi}"
+    for v in entries:
+        bad = math.isnan(v) or (math.isinf(v) and not inf_ok)
+        if low is not None and (v < low or (low_open and v == low)):
+            bad = True
+        if high is not None and (v > high or (high_open and v == high)):
+            bad = True
+        if bad:
+            raise ValueError(f"GMASettings.{name}={value!r}: expected every value in {expected}")
+    if entries.size == 0:
+        raise ValueError(f"GMASettings.{name}={value!r}: expected a number or a non-empty sequence")
+
+
+def per_setpoint(name: str, value, n: int) -> np.ndarray:
+    """Broadcast a scalar-or-sequence setting to shape ``(n,)``; ``ValueError`` on a length mismatch."""
+    arr = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+    if arr.size == 1:
+        return np.full(n, float(arr[0]))
+    if arr.size != n:
+        raise ValueError(f"GMASettings.{name}={value!r}: expected a scalar or {n} values, got {arr.size}")
+    return arr.copy()
+
+
+@dataclass
+class GMASettings:
+    """Validated settings of :class:`~kite_rto.gma.GMA`. Invalid values raise ``ValueError``.
+
+    Attributes:
+        filter_gain: input filter ``K`` in ``c_{k+1} = c_k + K (c*_{k+1} - c_k)``; scalar or one gain per
+            setpoint, each in ``(0, 1]``. 1 = no filtering.
+        trust_radius: initial trust-region half-width of the box ``|y(u) - c_k| <= Delta`` imposed in the
+            modified problem, relative to the setpoint box width; ``> 0``, ``inf`` disables the trust region.
+        trust_adapt: adapt the trust radius per setpoint: shrink it by ``trust_shrink`` when the step in that
+            setpoint changes sign (oscillation), grow it by ``trust_grow`` (up to ``trust_radius``) when the
+            step keeps its sign and reached the bound.
+        trust_shrink: shrink factor, in ``(0, 1)``.
+        trust_grow: growth factor, ``>= 1``.
+        trust_radius_min: lower limit of the adapted radius (relative), ``> 0``.
+        max_step: bound on the filtered step ``|c_{k+1} - c_k|`` per setpoint (relative), ``> 0``; ``inf`` = none.
+        convexification: diagonal of ``Q`` in the added cost ``0.5 (y(u) - c_k)^T Q (y(u) - c_k)``, in cost
+            units per setpoint unit squared, ``>= 0``. Vanishes at a fixed point, so it does not move the
+            converged point; it makes the modified problem more convex and the steps shorter.
+        backoff: constant tightening ``b`` of the modified constraints, ``g + eps + mu (y - c_k) + b <= 0``, in
+            constraint units, ``>= 0``; scalar or one per constraint.
+        backoff_std_factor: adds this many measured standard deviations (``ExperimentResult.constraints_std``)
+            to the back-off, ``>= 0``.
+        constraint_penalty: ``None`` = hard modified constraints. A number ``rho > 0`` makes them soft with an
+            exact L1 penalty ``rho * sum(s)``, so that the modified problem stays feasible inside a small
+            trust region; ``rho`` must exceed the constraint multipliers.
+        tol_c: convergence tolerance on ``|c_{k+1} - c_k|`` (relative), ``> 0``.
+        model_fd_step: step of the central differences of re-solves giving ``grad_c g_hat`` (relative),
+            in ``(0, 0.1]``.
+        model_point: where the model is linearized at ``c_k``. ``"consistent"`` (default): the model's best
+            realization of ``c_k`` under the previous iteration's modified constraints, gradients
+            ``grad_u(.) R`` with ``R`` a right inverse of ``dy/du`` in the tangent space of the active internal
+            constraints; at a fixed point this is the modified problem's own solution, so converged points
+            are plant KKT points even when ``g`` depends on model inputs that ``y`` does not fix.
+            ``"realization"``: SPEC §5 literally, ``u_hat = argmin phi s.t. y(u) = c_k``, ``grad_c phi_hat``
+            from the multipliers of ``y(u) = c_k`` and ``grad_c g_hat`` from central differences of re-solves;
+            exact when the modified constraints are inactive at the plant optimum or depend on ``u`` only
+            through ``y(u)``.
+        settle_time: hint copied into every :class:`ExperimentRequest` (generic units, e.g. s or laps), ``>= 0``.
+        averaging: averaging-length hint copied into every request (generic units), ``> 0``.
+        max_ipopt_iter: IPOPT iteration limit per solve, ``>= 1``.
+        ipopt_options: extra IPOPT options (without the ``ipopt.`` prefix), e.g. ``{"tol": 1e-9}``.
+    """
+
+    filter_gain: Scalar = 0.5
+    trust_radius: Scalar = 0.25
+    trust_adapt: bool = True
+    trust_shrink: float = 0.5
+    trust_grow: float = 2.0
+    trust_radius_min: float = 0.01
+    max_step: Scalar = math.inf
+    convexification: Scalar = 0.0
+    backoff: Scalar = 0.0
+    backoff_std_factor: float = 0.0
+    constraint_penalty: float | None = None
+    tol_c: float = 1e-4
+    model_fd_step: float = 1e-4
+    model_point: str = "consistent"
+    settle_time: float = 0.0
+    averaging: float = 1.0
+    max_ipopt_iter: int = 1000
+    ipopt_options: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        _check("filter_gain", self.filter_gain, 0.0, 1.0, low_open=True)
+        _check("trust_radius", self.trust_radius, 0.0, None, low_open=True, inf_ok=True)
+        if not isinstance(self.trust_adapt, bool):
+            raise ValueError(f"GMASettings.trust_adapt={self.trust_adapt!r}: expected True or False")
+        _check("trust_shrink", self.trust_shrink, 0.0, 1.0, low_open=True, high_open=True)
+        _check("trust_grow", self.trust_grow, 1.0, None)
+        _check("trust_radius_min", self.trust_radius_min, 0.0, None, low_open=True)
+        _check("max_step", self.max_step, 0.0, None, low_open=True, inf_ok=True)
+        _check("convexification", self.convexification, 0.0, None)
+        _check("backoff", self.backoff, 0.0, None)
+        _check("backoff_std_factor", self.backoff_std_factor, 0.0, None)
+        if self.constraint_penalty is not None:
+            _check("constraint_penalty", self.constraint_penalty, 0.0, None, low_open=True)
+        _check("tol_c", self.tol_c, 0.0, None, low_open=True)
+        _check("model_fd_step", self.model_fd_step, 0.0, 0.1, low_open=True)
+        if self.model_point not in ("consistent", "realization"):
+            raise ValueError(f"GMASettings.model_point={self.model_point!r}: expected 'consistent' or "
+                             f"'realization'")
+        _check("settle_time", self.settle_time, 0.0, None)
+        _check("averaging", self.averaging, 0.0, None, low_open=True)
+        if isinstance(self.max_ipopt_iter, bool) or not isinstance(self.max_ipopt_iter, int) \
+                or self.max_ipopt_iter < 1:
+            raise ValueError(f"GMASettings.max_ipopt_iter={self.max_ipopt_iter!r}: expected an integer >= 1")
+        if not isinstance(self.ipopt_options, dict):
+            raise ValueError(f"GMASettings.ipopt_options={self.ipopt_options!r}: expected a dict")
+        if np.any(np.asarray(self.trust_radius, dtype=float) < self.trust_radius_min):
+            raise ValueError(f"GMASettings.trust_radius_min={self.trust_radius_min!r}: expected "
+                             f"<= trust_radius={self.trust_radius!r}")
+
+    def to_dict(self) -> dict:
+        """Plain-JSON form (sequences as lists, ``inf`` as the string ``"inf"``)."""
+        def plain(v):
+            if isinstance(v, (list, tuple, np.ndarray)):
+                return [plain(x) for x in np.asarray(v, dtype=float).ravel()]
+            if isinstance(v, float) and math.isinf(v):
+                return "inf" if v > 0 else "-inf"
+            return v
+        return {k: plain(v) if k != "ipopt_options" else dict(v) for k, v in asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "GMASettings":
+        """Inverse of :meth:`to_dict`; unknown keys raise ``TypeError``."""
+        def back(v):
+            if isinstance(v, list):
+                return [back(x) for x in v]
+            if v in ("inf", "-inf"):
+                return float(v)
+            return v
+        return cls(**{k: back(v) if k != "ipopt_options" else v for k, v in data.items()})
