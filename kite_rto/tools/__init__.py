@@ -1,0 +1,1 @@
+"""Command-line tools: the demo (main job), graph launcher, monitor."""
