@@ -18,9 +18,7 @@ from .kite_ocp import KiteModelProblem, path_guess, unpack
 __all__ = ["OCPSolution", "OCPSolveError", "solve_model_optimum", "realize_setpoints"]
 
 _IPOPT = {"print_level": 0, "sb": "yes", "tol": 1e-8, "max_iter": 500}
-_WARM = {"warm_start_init_point": "yes", "mu_init": 1e-6, "warm_start_bound_push": 1e-9,
-         "warm_start_bound_frac": 1e-9, "warm_start_slack_bound_push": 1e-9,
-         "warm_start_slack_bound_frac": 1e-9, "warm_start_mult_bound_push": 1e-9}
+_WARM = {"warm_start_init_point": "yes", "mu_init": 1e-4}
 
 
 class OCPSolveError(RuntimeError):
@@ -83,7 +81,8 @@ class _Solvers:
         self.real_bounds = (np.concatenate([np.zeros(n_eq), np.full(n_in, -np.inf), np.zeros(pr.n_c)]),
                             np.zeros(n_eq + n_in + pr.n_c))
         self._cache = {}
-        self.report = ca.Function("report", [pr.u], [pr.cost, pr.constraints, pr.outputs])
+        self.report = ca.Function("report", [pr.u], [pr.cost, pr.constraints, pr.outputs, pr.mean_tension,
+                                                     pr.node_altitudes])
 
     def get(self, kind: str, warm: bool):
         key = (kind, warm)
@@ -107,22 +106,26 @@ def _solvers(problem: KiteModelProblem) -> _Solvers:
     return entry[1]
 
 
-def _run(s: _Solvers, kind: str, bounds, p, warm: OCPSolution | None, check: bool, x0=None) -> OCPSolution:
+def _run(s: _Solvers, kind: str, bounds, p, warm: OCPSolution | None, check: bool,
+         cold_x0=None, spent: float = 0.0) -> OCPSolution:
+    """Solve once; a failed warm start is retried cold from ``cold_x0()`` (or ``u0``), adding its time."""
     pr = s.problem
     solver = s.get(kind, warm is not None)
     args = {"lbx": pr.lbu, "ubx": pr.ubu, "lbg": bounds[0], "ubg": bounds[1]}
     if p is not None:
         args["p"] = p
     if warm is None:
-        args["x0"] = pr.u0 if x0 is None else x0
+        args["x0"] = pr.u0 if cold_x0 is None else cold_x0()
     else:
         args.update(x0=warm.u, lam_x0=warm.lam_x)
         if warm.lam_g.size == bounds[0].size:
             args["lam_g0"] = warm.lam_g
     t0 = time.perf_counter()
     sol = solver(**args)
-    elapsed = time.perf_counter() - t0
+    elapsed = time.perf_counter() - t0 + spent
     stats = solver.stats()
+    if warm is not None and not stats["success"]:   # a warm start at a bang-bang vertex can stall: go cold
+        return _run(s, kind, bounds, p, None, check, cold_x0, elapsed)
     if check and not stats["success"]:
         raise OCPSolveError(f"{pr.name}: IPOPT {kind} solve failed: {stats['return_status']}")
     return _solution(pr, s, sol, stats, elapsed)
@@ -130,15 +133,14 @@ def _run(s: _Solvers, kind: str, bounds, p, warm: OCPSolution | None, check: boo
 
 def _solution(pr: KiteModelProblem, s: _Solvers, sol, stats, elapsed) -> OCPSolution:
     u = np.asarray(sol["x"]).ravel()
-    cost, g, y = (np.asarray(v).ravel() for v in s.report(u))
+    cost, g, y, tension, z = (np.asarray(v).ravel() for v in s.report(u))
     parts = unpack(u, pr.settings)
-    theta, phi = parts["states"][:, 0], parts["states"][:, 1]
-    z_min = float(np.min(pr.params.r * np.sin(theta) * np.cos(phi)))
+    z_min = float(np.min(z))
     st = pr.settings
     g_m = float(g[0]) * st.constraint_unit
     return OCPSolution(
         u=u, c=y, cost=float(cost[0]), g=float(g[0]),
-        mean_tension_kn=-float(cost[0]) * st.cost_unit / 1000.0, min_altitude=z_min,
+        mean_tension_kn=float(tension[0]) / 1000.0, min_altitude=z_min,
         softmin_bias=z_min - (st.h_min - g_m), period=parts["period"], delta=parts["delta"],
         states=parts["states"], t=parts["t"], iterations=int(stats["iter_count"]), solve_time=elapsed,
         status=str(stats["return_status"]), lam_x=np.asarray(sol["lam_x"]).ravel(),
@@ -161,11 +163,12 @@ def realize_setpoints(problem: KiteModelProblem, c, warm: OCPSolution | None = N
     """The model's best lap with the given setpoints: ``min phi(u)`` s.t. dynamics, ``y(u) = c``, bounds.
 
     ``g(u) <= 0`` is *not* imposed (GMA's u_hat(c)). ``c`` = (theta_0, A_phi, A_theta), rad. Starts from the
-    figure-eight of ``c`` (:func:`path_guess`) or warm from ``warm`` (any earlier solution of this problem).
+    figure-eight of ``c`` (:func:`path_guess`) or warm from ``warm`` (any earlier solution of this problem;
+    if that warm start fails, it is retried cold, and ``solve_time`` includes both attempts).
     """
     c = np.asarray(c, dtype=float).ravel()
     if c.size != problem.n_c:
         raise ValueError(f"realize_setpoints: c has {c.size} entries, expected {problem.n_c}")
     s = _solvers(problem)
-    x0 = None if warm is not None else path_guess(problem.params, problem.settings, c)
-    return _run(s, "real", s.real_bounds, c, warm, check, x0)
+    return _run(s, "real", s.real_bounds, c, warm, check,
+                lambda: path_guess(problem.params, problem.settings, c))
