@@ -11,7 +11,8 @@ from .offline import run_offline
 from .problem import ModelProblem
 from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
 from .settings import GMASettings
+from .store import HistoryStore
 
-__all__ = ["ModelProblem", "GMASettings", "GMA", "ModelRealization", "GradientEstimator", "GradientEstimate",
+__all__ = ["HistoryStore", "ModelProblem", "GMASettings", "GMA", "ModelRealization", "GradientEstimator", "GradientEstimate",
            "PlantPoint", "FiniteDifferenceGradient", "LeastSquaresGradient", "ExperimentRequest",
            "ExperimentResult", "IterationRecord", "History", "run_offline"]
