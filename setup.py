@@ -24,6 +24,7 @@ setup(
         "console_scripts": [
             "plant = kite_rto.nodes.plant_node:main",
             "echo_pilot = kite_rto.nodes.echo_pilot:main",
+            "controller = kite_rto.nodes.controller_node:main",
         ],
     },
 )
