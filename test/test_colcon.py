@@ -43,7 +43,7 @@ def test_colcon_installs_package_files(workspace):
 
 
 def test_installed_plant_runs_and_validates(workspace, ros_env):
-    res = run_installed(workspace, "plant", "--ros-args -p duration:=0.2 -p command_timeout:=0.02", ros_env)
+    res = run_installed(workspace, "plant", "--ros-args -p mode:=realtime -p rate_factor:=10.0 -p duration:=0.5", ros_env)
     assert res.returncode == 0, res.stdout + res.stderr
     assert "duration reached" in res.stdout + res.stderr
     res = run_installed(workspace, "plant", "--ros-args -p r:=-5.0", ros_env)
@@ -52,6 +52,6 @@ def test_installed_plant_runs_and_validates(workspace, ros_env):
 
 def test_installed_plant_reads_params_file(workspace, ros_env):
     cfg = workspace / "install" / "kite_rto" / "share" / "kite_rto" / "config" / "kite_rto.yaml"
-    res = run_installed(workspace, "plant", f"--ros-args --params-file {cfg} -p duration:=0.1 "
-                        "-p command_timeout:=0.02", ros_env)
+    res = run_installed(workspace, "plant", f"--ros-args --params-file {cfg} -p mode:=realtime -p rate_factor:=10.0 -p duration:=0.2 "
+                        , ros_env)
     assert res.returncode == 0, res.stdout + res.stderr

@@ -95,10 +95,18 @@ def test_realtime_mode_keeps_pace(probe, ros_env):
 
 
 def test_neutral_after_timeout_in_lockstep(probe, ros_env):
-    """With no controller the lockstep plant still advances (neutral) after command_timeout, and says so."""
+    """When the controller stops answering, the lockstep plant advances (neutral) after command_timeout."""
     proc = start_node("plant", {"turbulence": False, "command_timeout": 0.1, "duration": 1.0}, ros_env)
+    states = []
+    steer = probe.node.create_publisher(JointState, "/kite/steering", RELIABLE_10)
+    probe.node.create_subscription(JointState, "/kite/state", states.append, RELIABLE_10)
     try:
-        assert proc.wait(timeout=60) == 0
+        assert probe.spin_until(lambda: states, 30.0)
+        cmd = JointState(name=["delta"], position=[0.0])
+        cmd.header.stamp = states[0].header.stamp
+        steer.publish(cmd)                          # one answer, then silence
+        assert probe.spin_until(lambda: proc.poll() is not None, 60.0)
+        assert proc.returncode == 0
     finally:
         out = stop(proc)
     assert "flying neutral" in out and "duration reached" in out

@@ -68,7 +68,7 @@ class ControllerSettings:
     k_i: float = 0.5
     integral_limit: float = 0.05
     turn_margin: float = DEFAULT_TURN_MARGIN
-    blend_time: float = 5.0
+    blend_time: float = 10.0
     speed_filter: float = 3.0
     gain_filter: float = 5.0
     box: SetpointBox = field(default_factory=SetpointBox)
@@ -158,11 +158,16 @@ class PathController:
         return self._c
 
     def set_setpoints(self, c) -> Setpoints:
-        """Validate and switch to ``c`` smoothly; raises :class:`SetpointError` and keeps the old path if bad."""
+        """Validate and switch to ``c`` smoothly; raises :class:`SetpointError` and keeps the old path if bad.
+
+        The reference blends linearly from the current (possibly blended) setpoints to ``c`` over
+        ``settings.blend_time`` s; intermediate setpoints are not re-validated (both ends are).
+        """
         c = self._validate(c)
         self._c_from = self._current_setpoints()
         self._c = c
         self._blend = 0.0 if self.settings.blend_time > 0 else 1.0
+        self.path = FigureEightPath(self._current_setpoints())
         return c
 
     def _current_setpoints(self) -> Setpoints:

@@ -87,16 +87,17 @@ class SetpointBox:
     figures are therefore untrackable. A first guess (theta_0 in [18, 40] deg, A_phi in [10, 50] deg,
     A_theta in [2, 12] deg) is mostly infeasible: it asks for radii down to 2 m while the nominal kite's
     minimum radius is 1/g_s = 25 m (the model optimum quoted in SPEC §2, (22, 15, 4) deg, needs 4.6 m).
-    The feasible set is a thin band ``A_theta ~ sqrt(sin theta_0 A_phi)``, not a box; the default box is
-    the largest simple box found whose 8 corners all pass :func:`validate_setpoints` with the default
-    ``margin`` (tightest corner: 26.7 m at (30, 40, 7.5) deg):
-    theta_0 in [30, 40] deg, A_phi in [40, 50] deg, A_theta in [6, 7.5] deg (positive: up through the centre).
+    The feasible set is a thin band ``A_theta ~ sqrt(sin theta_0 A_phi)``, not a box; the default box is a
+    simple box whose 8 corners all pass :func:`validate_setpoints` with the default ``margin`` (tightest
+    corner: 28.7 m effective radius at (30, 42, 7.5) deg) and track within 0.5 deg RMS on the default plant:
+    theta_0 in [30, 38] deg, A_phi in [42, 50] deg, A_theta in [6.5, 7.5] deg (positive: up through the centre).
+    (theta_0 = 40 deg with A_theta = 6 deg saturated the steering 25 % of the time: 0.5-0.7 deg RMS.)
     Interior points can still be infeasible (non-convex band); :func:`validate_setpoints` checks every point.
     """
 
-    theta_0: tuple = (math.radians(30.0), math.radians(40.0))
-    A_phi: tuple = (math.radians(40.0), math.radians(50.0))
-    A_theta: tuple = (math.radians(6.0), math.radians(7.5))
+    theta_0: tuple = (math.radians(30.0), math.radians(38.0))
+    A_phi: tuple = (math.radians(42.0), math.radians(50.0))
+    A_theta: tuple = (math.radians(6.5), math.radians(7.5))
 
     def __post_init__(self):
         for name in Setpoints.names():
@@ -211,6 +212,22 @@ class FigureEightPath:
         """Tightest turn radius of the path, m, for a tether of length r (m)."""
         return r / self.max_curvature()[0]
 
+    def effective_turn_radius(self, r: float, E: float, n: int = 720) -> float:
+        """Tightest turn radius (m) divided by the kite's speed factor there, to compare with 1/(g_s delta).
+
+        Flying along course chi, the model's velocity is ``(w_ap/r) lam (cos chi, sin chi)`` with
+        ``lam = -k cos chi + sqrt(1 - k^2 sin^2 chi)``, ``k = tan(theta)/E`` (slower upwards, faster downwards);
+        the steering needed is ``delta = kappa lam / (r g_s)``, so the path is trackable with ``|delta| <= d``
+        when ``min_s r / (|kappa| lam) >= 1 / (g_s d)``.
+        """
+        worst = 0.0
+        for si in np.arange(n) * (TWO_PI / n):
+            k = math.tan(self._t0 + self._at * math.sin(2 * si)) / E
+            chi = self.course(si)
+            lam = -k * math.cos(chi) + math.sqrt(max(1.0 - (k * math.sin(chi)) ** 2, 0.0))
+            worst = max(worst, abs(self.curvature(si)) * lam)
+        return r / worst
+
     def length(self, n: int = 720) -> float:
         """Arc length of one lap, rad (times r for metres)."""
         return float(sum(self.speed(si) for si in np.arange(n) * (TWO_PI / n)) * TWO_PI / n)
@@ -255,20 +272,28 @@ class FigureEightPath:
         th, ph = self.point(grid)
         d2 = (theta - th) ** 2 + (np.sin(0.5 * (theta + th)) * (phi - ph)) ** 2
         s0 = float(grid[int(np.argmin(d2))])
-        s = self._refine(s0, theta, phi)
+        s = self._refine(s0, theta, phi, iters=12)
         if s_guess is not None:  # stay inside the window (the refinement may leave it near the centre)
             rel = (s - s_guess + math.pi) % TWO_PI - math.pi
             if not (window[0] - 0.05 <= rel <= window[1] + 0.05):
                 s = s0 % TWO_PI
         return self._closest(s, theta, phi)
 
-    def track(self, theta: float, phi: float, s_prev: float) -> ClosestPoint:
-        """Fast per-sample closest point, warm-started from ``s_prev`` (Gauss-Newton only, no grid)."""
+    def track(self, theta: float, phi: float, s_prev: float, lost_distance: float = 0.1) -> ClosestPoint:
+        """Fast per-sample closest point, warm-started from ``s_prev`` (Gauss-Newton only, no grid).
+
+        Falls back to the windowed search if s jumps by more than 0.5, and to the global search if the
+        point is farther than ``lost_distance`` (rad of arc) from the path.
+        """
         s = self._refine(s_prev, theta, phi, iters=3)
         rel = (s - s_prev + math.pi) % TWO_PI - math.pi
         if abs(rel) > 0.5:  # lost (large jump): fall back to the windowed search
-            return self.closest_point(theta, phi, s_guess=s_prev)
-        return self._closest(s, theta, phi)
+            cp = self.closest_point(theta, phi, s_guess=s_prev)
+        else:
+            cp = self._closest(s, theta, phi)
+        if abs(cp.cross_track) > lost_distance:  # far off the path (relaunch, new path): global search
+            cp = self.closest_point(theta, phi)
+        return cp
 
     def _closest(self, s: float, theta: float, phi: float) -> ClosestPoint:
         dn, de, _, _, th, ph, st, _, dth, dph, _, _ = self._residual(s, theta, phi)
@@ -323,9 +348,10 @@ def validate_setpoints(c, box: SetpointBox | None = None, model_params: KitePara
             raise SetpointError(f"setpoint {name} = {v:.6g} rad ({math.degrees(v):.3g} deg): outside the box "
                                 f"[{lo:.6g}, {hi:.6g}] rad ([{math.degrees(lo):.3g}, {math.degrees(hi):.3g}] deg)")
     r_req = required_turn_radius(model_params, delta_max, margin)
-    r_path = FigureEightPath(c).min_turn_radius(model_params.r)
+    r_path = FigureEightPath(c).effective_turn_radius(model_params.r, model_params.E)
     if r_path < r_req:
         raise SetpointError(
             f"setpoints {tuple(round(d, 2) for d in c.degrees())} deg: infeasible turn, tightest path radius "
-            f"{r_path:.1f} m < {r_req:.1f} m = 1/(g_s {model_params.g_s:g} * delta_max {delta_max:g} * margin {margin:g})")
+            f"{r_path:.1f} m (divided by the drift speed factor) < {r_req:.1f} m = "
+            f"1/(g_s {model_params.g_s:g} * delta_max {delta_max:g} * margin {margin:g})")
     return c

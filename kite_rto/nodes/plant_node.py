@@ -3,7 +3,8 @@
 Modes: ``lockstep`` publishes sample k and advances only when the steering command stamped with sample k's time
 arrives (deterministic, as fast as the loop allows; a lost message is recovered by re-publishing the sample);
 ``realtime`` advances at wall-clock pace times ``rate_factor`` with a zero-order hold on the last command.
-Without commands for ``command_timeout`` seconds (wall clock) the kite flies neutral (delta = 0) and says so.
+Without commands for ``command_timeout`` seconds (wall clock) the kite flies neutral (delta = 0) and says so; in
+lockstep this starts after the first command, so a run does not depend on how long the controller takes to start.
 """
 from __future__ import annotations
 
@@ -88,6 +89,7 @@ class PlantNode(Node):
         self._last_command = time.monotonic()
         self._last_publish = time.monotonic()
         self._neutral = False
+        self._commands = 0
         self._crashes = 0
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         if self._lockstep:
@@ -119,9 +121,13 @@ class PlantNode(Node):
             self.advance(self._delta)
 
     def watchdog_callback(self) -> None:
-        """Lockstep: re-publish an unanswered sample; fly neutral when commands stop."""
+        """Lockstep: re-publish an unanswered sample; fly neutral when commands stop.
+
+        Before the first command ever arrives the plant only waits (and re-publishes), so a lockstep run does
+        not depend on how long the controller takes to start.
+        """
         now = time.monotonic()
-        if now - self._last_command > self.p["command_timeout"]:
+        if self._commands and now - self._last_command > self.p["command_timeout"]:
             self._fly_neutral()
             self.advance(0.0)
         elif now - self._last_publish > self.p["resend_period"]:
@@ -145,6 +151,7 @@ class PlantNode(Node):
             raise SystemExit(0)
 
     def _command_received(self) -> None:
+        self._commands += 1
         self._last_command = time.monotonic()
         if self._neutral:
             self._neutral = False
