@@ -1,0 +1,146 @@
+"""Baselines for GMA on the same plant and measurement budget (same experiments, same flight time limit).
+
+* :func:`model_only` — fly the model-only optimum, no adaptation.
+* :func:`finite_difference_ascent` — model-free: forward-difference gradient of the measured tension, projected
+  gradient step in box-normalized coordinates, step length halved when the measured tension drops.
+* :func:`nelder_mead_plant` — SciPy Nelder–Mead directly on measured experiments (box-normalized, clipped).
+
+Each returns a :class:`BaselineRun`: the candidate setpoints it would recommend after each experiment and the
+flight time at which it could; :func:`time_to_target` judges the candidates on the deterministic plant.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .experiment import ExperimentSpec, PlantFlight
+from .oracle import plant_performance
+from .path import SetpointBox
+from .plant import PlantConfig
+
+__all__ = ["BaselineRun", "model_only", "finite_difference_ascent", "nelder_mead_plant", "time_to_target"]
+
+
+class _Budget(Exception):
+    pass
+
+
+@dataclass
+class BaselineRun:
+    """Candidates (rad, (n, 3)) and the flight time (s) at which each became the recommendation."""
+
+    name: str
+    candidates: list = field(default_factory=list)
+    times: list = field(default_factory=list)
+    flight_time: float = 0.0
+    experiments: int = 0
+
+    def add(self, c, t) -> None:
+        self.candidates.append(np.asarray(c, dtype=float).copy())
+        self.times.append(float(t))
+
+
+def model_only(c0, budget: float) -> BaselineRun:
+    """The model-only optimum ``c0`` held for the whole budget (s)."""
+    run = BaselineRun("model-only")
+    run.add(c0, 0.0)
+    run.flight_time = budget
+    return run
+
+
+def _flight(config, seed, spec, c0):
+    return PlantFlight(config or PlantConfig(), seed, spec, c0=c0)
+
+
+def finite_difference_ascent(config: PlantConfig | None, seed: int, c0, budget: float,
+                             spec: ExperimentSpec | None = None, box: SetpointBox | None = None,
+                             fd_step: float = 0.5, step: float = 0.3) -> BaselineRun:
+    """Model-free projected gradient ascent on the measured (normalized) tension.
+
+    Per iteration: nominal + 3 forward perturbations (``fd_step`` of the box width); move ``step`` (box
+    widths) along the normalized gradient; halve ``step`` when the nominal tension dropped. Altitude:
+    the measured constraint ``g`` > 0 adds its gradient (penalty 5 kN/m).
+    """
+    box = box or SetpointBox()
+    spec = spec or ExperimentSpec(n_laps=4)
+    lo, hi = box.lower(), box.upper()
+    w = hi - lo
+    fl = _flight(config, seed, spec, c0)
+    run = BaselineRun("FD ascent")
+    x = (np.asarray(c0, dtype=float) - lo) / w
+    run.add(lo + x * w, 0.0)
+    prev = -math.inf
+    while fl.t < budget:
+        f0 = fl.fly(lo + x * w)
+        merit0 = -f0.cost - 5.0 * max(0.0, f0.constraint)
+        if merit0 < prev:
+            step *= 0.5
+        prev = merit0
+        grad = np.zeros(3)
+        for i in range(3):
+            xp = x.copy()
+            h = fd_step if x[i] + fd_step <= 1.0 else -fd_step
+            xp[i] = np.clip(x[i] + h, 0.0, 1.0)
+            fp = fl.fly(lo + xp * w)
+            grad[i] = ((-fp.cost - 5.0 * max(0.0, fp.constraint)) - merit0) / (xp[i] - x[i])
+        n = np.linalg.norm(grad)
+        if n > 0:
+            x = np.clip(x + step * grad / n, 0.0, 1.0)
+        run.add(lo + x * w, fl.t)
+    run.flight_time, run.experiments = fl.t, len(fl.experiments)
+    return run
+
+
+def nelder_mead_plant(config: PlantConfig | None, seed: int, c0, budget: float,
+                      spec: ExperimentSpec | None = None, box: SetpointBox | None = None,
+                      simplex: float = 0.3) -> BaselineRun:
+    """SciPy Nelder–Mead on measured experiments; the candidate is the best measured point so far."""
+    from scipy.optimize import minimize
+    box = box or SetpointBox()
+    spec = spec or ExperimentSpec(n_laps=4)
+    lo, hi = box.lower(), box.upper()
+    w = hi - lo
+    fl = _flight(config, seed, spec, c0)
+    run = BaselineRun("Nelder-Mead")
+    x0 = (np.asarray(c0, dtype=float) - lo) / w
+    run.add(c0, 0.0)
+    best = [math.inf]
+
+    def f(x):
+        if fl.t >= budget:
+            raise _Budget
+        xc = np.clip(x, 0.0, 1.0)
+        out = fl.fly(lo + xc * w)
+        val = out.cost + 5.0 * max(0.0, out.constraint)
+        if val < best[0]:
+            best[0] = val
+            run.add(lo + xc * w, fl.t)
+        return val + 1e3 * float(np.sum((x - xc) ** 2))
+
+    sim = np.vstack([x0] + [np.clip(x0 + (simplex if x0[i] < 0.5 else -simplex) * np.eye(3)[i], 0, 1)
+                            for i in range(3)])
+    try:
+        minimize(f, x0, method="Nelder-Mead", options={"initial_simplex": sim, "maxfev": 10_000,
+                                                        "xatol": 1e-3, "fatol": 1e-3})
+    except _Budget:
+        pass
+    run.flight_time, run.experiments = fl.t, len(fl.experiments)
+    return run
+
+
+def time_to_target(candidates, times, config: PlantConfig | None, target_kn: float, h_min: float = 100.0,
+                   h_tol: float = 2.0) -> tuple:
+    """First ``(index, flight time s)`` whose candidate, re-flown on the deterministic plant, gives at least
+    ``target_kn`` with min altitude >= ``h_min - h_tol``; ``(None, inf)`` if none does. Candidates equal to
+    the previous one are not re-flown."""
+    last = None
+    for i, (c, t) in enumerate(zip(candidates, times)):
+        if last is not None and np.allclose(c, last, atol=1e-9):
+            continue
+        last = c
+        tension, z = plant_performance(config, c)
+        if tension >= target_kn and z >= h_min - h_tol:
+            return i, t
+    return None, math.inf

@@ -1,0 +1,288 @@
+"""The kite as a GMA problem: settings, the GMA builder, the per-sample session and the pure runner.
+
+* :class:`KiteRTOSettings` — experiment, gradient and GMA tuning for the kite (defaults measured, see below).
+* :func:`make_kite_gma` — a :class:`~kite_rto.gma.GMA` on :func:`~kite_rto.core.kite_ocp.kite_model_problem`
+  whose setpoint box is the path controller's :class:`~kite_rto.core.path.SetpointBox` (every point of it
+  is trackable), started at the model-only optimum.
+* :class:`RTOSession` — the per-sample logic shared by the pure runner and the ROS optimizer node:
+  ``session.start(t)`` gives the first setpoints, then ``session.on_measurement(m)`` for every plant
+  measurement returns new setpoints to apply (or None). It feeds an
+  :class:`~kite_rto.core.experiment.ExperimentEvaluator`, repeats crashed experiments and calls GMA's
+  ``next_request`` / ``submit``.
+* :func:`run_kite_rto` — one :class:`KitePlant` + :class:`PathController` flying continuously, the session
+  changing the setpoints; returns an :class:`RTOResult` with every :class:`IterationRecord`.
+
+Tuning (``benchmarks/bench_normalization.py``): with turbulence a lap's tension scatters by ~145 kN raw and
+~34 kN after the tension-coefficient normalization (lap-to-lap correlation ~0.4), while the whole setpoint box
+spans only ~25 kN of plant tension. Finite-difference steps therefore take half the box width (the
+``from_noise`` rule asks for more than the box), each experiment averages 4 laps, and the filter gain and trust
+region are moderate so that one noisy gradient cannot throw the iterate across the box.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from functools import lru_cache
+
+import numpy as np
+
+from ..gma import GMA, ExperimentResult, FiniteDifferenceGradient, GMASettings, LeastSquaresGradient
+from .closed_loop import make_closed_loop
+from .controller import ControllerSettings
+from .experiment import ExperimentEvaluator, ExperimentOutcome, ExperimentSpec
+from .kite_ocp import KiteOCPSettings, kite_model_problem
+from .params import KiteParams
+from .path import SetpointBox, Setpoints
+from .plant import PlantConfig
+
+__all__ = ["KiteRTOSettings", "kite_problem", "make_kite_gma", "RTOSession", "ExperimentLog", "RTOResult",
+           "run_kite_rto", "model_only_optimum"]
+
+_GRADIENTS = ("forward", "central", "least_squares")
+
+
+@dataclass(frozen=True)
+class KiteRTOSettings:
+    """Tuning of GMA on the kite.
+
+    Attributes:
+        experiment: :class:`ExperimentSpec` of every experiment (nominal and perturbations).
+        box: setpoint box of the optimizer (rad); the controller's default box, whose points all track.
+        gradient: ``"forward"`` / ``"central"`` finite differences, or ``"least_squares"`` over past points
+            with forward differences as fallback.
+        fd_step: finite-difference step per setpoint, relative to the box width, in (0, 1].
+        filter_gain: GMA input filter K, in (0, 1].
+        trust_radius: initial GMA trust radius (relative to the box width), > 0.
+        trust_radius_min: lower limit of the adapted trust radius (relative), > 0.
+        backoff: constraint back-off, m (>= 0).
+        max_repeats: times a crashed/invalid experiment is repeated before it is submitted as measured
+            (NaN-free) or, with no lap at all, the run stops (>= 0).
+        c0: initial setpoints (rad); None = the model-only optimum.
+    """
+
+    experiment: ExperimentSpec = field(default_factory=lambda: ExperimentSpec(n_laps=4))
+    box: SetpointBox = field(default_factory=SetpointBox)
+    gradient: str = "forward"
+    fd_step: tuple = (0.5, 0.5, 0.5)
+    filter_gain: float = 0.6
+    trust_radius: float = 0.4
+    trust_radius_min: float = 0.05
+    backoff: float = 2.0
+    max_repeats: int = 3
+    c0: tuple | None = None
+
+    def __post_init__(self):
+        n = type(self).__name__
+        if self.gradient not in _GRADIENTS:
+            raise ValueError(f"{n}.gradient = {self.gradient!r}: expected one of {_GRADIENTS}")
+        steps = np.atleast_1d(np.asarray(self.fd_step, dtype=float))
+        if steps.size not in (1, 3) or not np.all((steps > 0) & (steps <= 1)):
+            raise ValueError(f"{n}.fd_step = {self.fd_step!r}: expected 1 or 3 values in (0, 1]")
+        if not 0 < self.filter_gain <= 1:
+            raise ValueError(f"{n}.filter_gain = {self.filter_gain!r}: expected a value in (0, 1]")
+        for f in ("trust_radius", "trust_radius_min"):
+            if not getattr(self, f) > 0:
+                raise ValueError(f"{n}.{f} = {getattr(self, f)!r}: expected a value > 0")
+        if not self.backoff >= 0:
+            raise ValueError(f"{n}.backoff = {self.backoff!r}: expected a value >= 0")
+        if isinstance(self.max_repeats, bool) or not isinstance(self.max_repeats, int) or self.max_repeats < 0:
+            raise ValueError(f"{n}.max_repeats = {self.max_repeats!r}: expected an integer >= 0")
+
+    def gma_settings(self) -> GMASettings:
+        """The :class:`GMASettings` these settings stand for (settle/averaging hints in s and laps)."""
+        sp = self.experiment
+        return GMASettings(filter_gain=self.filter_gain, trust_radius=self.trust_radius,
+                           trust_radius_min=min(self.trust_radius_min, self.trust_radius),
+                           backoff=self.backoff, settle_time=sp.settle_time, averaging=float(sp.n_laps),
+                           tol_c=1e-3)
+
+    def gradient_estimator(self):
+        """The plant-gradient strategy (absolute steps, rad)."""
+        width = self.box.upper() - self.box.lower()
+        steps = np.broadcast_to(np.asarray(self.fd_step, dtype=float), (3,)) * width
+        if self.gradient == "least_squares":
+            return LeastSquaresGradient(FiniteDifferenceGradient(steps), radius=2.0 * steps, window=8)
+        return FiniteDifferenceGradient(steps, self.gradient)
+
+
+@lru_cache(maxsize=4)
+def kite_problem(box: SetpointBox = SetpointBox(), model_params: KiteParams = KiteParams(),
+                 ocp: KiteOCPSettings = KiteOCPSettings()):
+    """The kite lap OCP on the optimizer's setpoint box (cached per process: building it takes seconds)."""
+    return kite_model_problem(model_params, ocp, c_lb=box.lower(), c_ub=box.upper(),
+                              c_guess=0.5 * (box.lower() + box.upper()), name="kite_lap")
+
+
+@lru_cache(maxsize=4)
+def _model_optimum_cached(box, model_params, ocp) -> tuple:
+    from .kite_ocp_solve import solve_model_optimum
+    sol = solve_model_optimum(kite_problem(box, model_params, ocp))
+    return tuple(np.clip(sol.c, box.lower(), box.upper()).tolist()), sol.mean_tension_kn, sol.min_altitude
+
+
+def model_only_optimum(box: SetpointBox = SetpointBox(), model_params: KiteParams = KiteParams(),
+                       ocp: KiteOCPSettings = KiteOCPSettings()) -> tuple:
+    """``(c rad (3,), model mean tension kN, model min altitude m)`` of the model's own optimum in ``box``."""
+    c, t, z = _model_optimum_cached(box, model_params, ocp)
+    return np.array(c), t, z
+
+
+def make_kite_gma(settings: KiteRTOSettings | None = None, model_params: KiteParams | None = None,
+                  ocp: KiteOCPSettings | None = None, c0=None, history=None) -> GMA:
+    """A :class:`GMA` on the kite lap model, started at ``c0`` (default: settings.c0, else the model optimum).
+
+    ``ocp.h_min`` must equal ``settings.experiment.h_min`` (the plant's and the model's constraint agree).
+    """
+    settings = settings or KiteRTOSettings()
+    model_params = model_params or KiteParams()
+    ocp = ocp or KiteOCPSettings(h_min=settings.experiment.h_min)
+    if abs(ocp.h_min - settings.experiment.h_min) > 1e-9:
+        raise ValueError(f"make_kite_gma: KiteOCPSettings.h_min = {ocp.h_min!r} differs from "
+                         f"ExperimentSpec.h_min = {settings.experiment.h_min!r}")
+    problem = kite_problem(settings.box, model_params, ocp)
+    if c0 is None:
+        c0 = settings.c0 if settings.c0 is not None else model_only_optimum(settings.box, model_params, ocp)[0]
+    c0 = np.clip(np.asarray(c0, dtype=float), settings.box.lower(), settings.box.upper())
+    return GMA(problem, settings.gma_settings(), settings.gradient_estimator(), c0=c0, history=history)
+
+
+@dataclass
+class ExperimentLog:
+    """One finished experiment: GMA's request id, the setpoints, the outcome submitted, repeats needed."""
+
+    request_id: str
+    c: np.ndarray
+    outcome: ExperimentOutcome
+    repeats: int
+
+
+def _result(request_id: str, out: ExperimentOutcome) -> ExperimentResult:
+    std = lambda v: None if not math.isfinite(v) else float(v)  # noqa: E731
+    cs, gs = std(out.cost_std), std(out.constraint_std)
+    return ExperimentResult(request_id, float(out.cost), np.array([out.constraint]), cs,
+                            None if gs is None else np.array([gs]),
+                            {"n_laps": out.n_laps, "t_start": out.t_start, "t_end": out.t_end,
+                             "mean_tension_kn": out.mean_tension_kn, "timed_out": out.timed_out})
+
+
+class RTOSession:
+    """Per-sample GMA driver: measurements in, setpoints out (shared by the pure runner and the ROS node).
+
+    Args:
+        gma: a :class:`GMA` (e.g. from :func:`make_kite_gma`).
+        spec: the :class:`ExperimentSpec` of every experiment.
+        max_repeats: repetitions of an invalid experiment (crash, no lap) before giving up on it.
+    """
+
+    def __init__(self, gma: GMA, spec: ExperimentSpec | None = None, max_repeats: int = 3):
+        self.gma = gma
+        self.evaluator = ExperimentEvaluator(spec or ExperimentSpec())
+        self.max_repeats = int(max_repeats)
+        self.request = None
+        self.repeats = 0
+        self.experiments: list[ExperimentLog] = []
+        self.record_times: list[float] = []   # flight time (s) at which each IterationRecord completed
+        self.failed = ""                       # reason if the session had to stop
+
+    @property
+    def records(self):
+        return self.gma.records
+
+    @property
+    def c(self) -> np.ndarray | None:
+        """Setpoints of the experiment in progress (rad)."""
+        return None if self.request is None else np.asarray(self.request.c, dtype=float)
+
+    def start(self, t: float) -> np.ndarray:
+        """Begin (or resume) with GMA's next request at time ``t`` s; returns the setpoints to apply."""
+        self.request = self.gma.next_request()
+        self.repeats = 0
+        self.evaluator.start(t, self.request.c)
+        return self.c
+
+    def on_measurement(self, m) -> np.ndarray | None:
+        """Feed one plant measurement; returns new setpoints (rad, (3,)) when they must change, else None.
+
+        A crashed experiment is repeated (the same setpoints are returned again, restarting the settling).
+        """
+        if self.request is None or self.failed:
+            return None
+        out = self.evaluator.update(m)
+        if out is None:
+            return None
+        if not out.valid and self.repeats < self.max_repeats:
+            self.repeats += 1
+            self.evaluator.start(m.t, self.request.c)
+            return self.c
+        if not out.valid:
+            self.failed = f"experiment {self.request.request_id} invalid after {self.repeats} repeats"
+            return None
+        self.experiments.append(ExperimentLog(self.request.request_id, self.c, out, self.repeats))
+        rec = self.gma.submit(_result(self.request.request_id, out))
+        if rec is not None:
+            self.record_times.append(float(m.t))
+        return self.start(m.t)
+
+
+@dataclass
+class RTOResult:
+    """Outcome of :func:`run_kite_rto`.
+
+    Attributes:
+        records: every :class:`IterationRecord`.
+        experiments: every :class:`ExperimentLog`.
+        iterates: c_0, c_1, ..., c_K (rad), shape (K + 1, 3); c_{k+1} = records[k].c_next.
+        iterate_times: flight time (s) at which each iterate became available (0 for c_0).
+        flight_time: total simulated flight time, s.
+        crashes: plant crashes during the run.
+        seed, failed: plant seed; reason if the run stopped early ("" otherwise).
+        history: GMA's :class:`History` (JSON-serializable).
+    """
+
+    records: list
+    experiments: list
+    iterates: np.ndarray
+    iterate_times: np.ndarray
+    flight_time: float
+    crashes: int
+    seed: int
+    failed: str
+    history: object
+
+
+def run_kite_rto(plant_config: PlantConfig | None = None, seed: int = 0, n_iter: int = 10,
+                 settings: KiteRTOSettings | None = None, gma: GMA | None = None,
+                 controller_settings: ControllerSettings | None = None,
+                 max_flight_time: float = math.inf) -> RTOResult:
+    """Fly GMA on one continuously flying simulated kite for ``n_iter`` iterations (pure, no ROS).
+
+    Args:
+        plant_config: the real kite (:class:`PlantConfig` defaults: turbulence and noise on).
+        seed: plant seed (turbulence and noise); same seed, same setpoint sequence.
+        n_iter: GMA iterations to complete.
+        settings: :class:`KiteRTOSettings`.
+        gma: a fresh GMA to use (default :func:`make_kite_gma` of ``settings``).
+        controller_settings: :class:`ControllerSettings` (``box`` is replaced by ``settings.box``).
+        max_flight_time: stop after this much simulated flight, s.
+    """
+    settings = settings or KiteRTOSettings()
+    gma = gma or make_kite_gma(settings)
+    cs = replace(controller_settings or ControllerSettings(), box=settings.box)
+    session = RTOSession(gma, settings.experiment, settings.max_repeats)
+    c_first = Setpoints.from_array(np.asarray(gma.next_request().c, dtype=float))
+    plant, controller = make_closed_loop(c_first, plant_config, seed=seed, settings=cs)
+    m = plant.measure()
+    crashes0 = m.crashes
+    new = session.start(m.t)
+    k0 = len(gma.records)
+    while len(gma.records) - k0 < n_iter and not session.failed and m.t < max_flight_time:
+        if new is not None:
+            controller.set_setpoints(Setpoints.from_array(new))
+        m = plant.step(controller.command(m))
+        new = session.on_measurement(m)
+    iterates = [np.asarray(gma.history.c0 if k0 == 0 else gma.records[k0 - 1].c_next, dtype=float)]
+    iterates += [np.asarray(r.c_next, dtype=float) for r in gma.records[k0:]]
+    return RTOResult(records=list(gma.records[k0:]), experiments=session.experiments,
+                     iterates=np.array(iterates), iterate_times=np.r_[0.0, session.record_times],
+                     flight_time=float(m.t), crashes=m.crashes - crashes0, seed=seed, failed=session.failed,
+                     history=gma.history)

@@ -1,0 +1,111 @@
+"""The true plant optimum ("oracle"): direct optimization of the deterministic closed loop over the setpoints.
+
+:func:`plant_performance` flies setpoints ``c`` on the plant with turbulence and noise off, from launch, and
+averages whole laps after the transient. :func:`find_oracle` maximizes the mean tension over the setpoint box
+subject to ``min altitude >= h_min``: a coarse grid, then Nelder–Mead (box-normalized coordinates, clipped,
+with a penalty on altitude violation) from the best grid points. Results are cached in
+``runs/oracle_<hash>.json`` keyed by the plant configuration, the box and the evaluation settings.
+"""
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import math
+import os
+from dataclasses import dataclass, asdict
+
+import numpy as np
+
+from .experiment import ExperimentSpec, PlantFlight
+from .path import SetpointBox
+from .plant import PlantConfig
+
+__all__ = ["OracleResult", "plant_performance", "find_oracle", "DEFAULT_CACHE_DIR"]
+
+DEFAULT_CACHE_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
+                                 "runs")
+_SPEC = ExperimentSpec(settle_time=40.0, settle_laps=1, n_laps=3, normalize=False)
+_MEMO: dict = {}
+
+
+def plant_performance(config: PlantConfig | None = None, c=None, spec: ExperimentSpec = _SPEC) -> tuple:
+    """``(mean tension kN, min altitude m)`` of the deterministic plant (turbulence and noise off) at ``c``
+    (rad), from launch, after ``spec.settle_time`` s and ``spec.settle_laps`` laps, over ``spec.n_laps``
+    laps. Memoized per process. A crash gives ``(0, -inf)``.
+    """
+    config = (config or PlantConfig()).without_disturbances()
+    c = np.asarray(c, dtype=float)
+    key = (repr(config), tuple(np.round(c, 10)), spec)
+    if key not in _MEMO:
+        out = PlantFlight(config, 0, spec).fly(c, max_repeats=0)
+        _MEMO[key] = (out.mean_tension_kn, out.min_altitude) if out.valid and not out.timed_out \
+            else (0.0, -math.inf)
+    return _MEMO[key]
+
+
+@dataclass
+class OracleResult:
+    """The plant optimum: ``c`` rad, ``c_deg``, ``tension_kn``, ``min_altitude`` m, evaluations used."""
+
+    c: list
+    c_deg: list
+    tension_kn: float
+    min_altitude: float
+    evaluations: int
+    key: str
+
+
+def _key(config: PlantConfig, box: SetpointBox, h_min: float, spec: ExperimentSpec, grid: int) -> str:
+    text = repr((config.without_disturbances(), box, h_min, spec, grid, "v1"))
+    return hashlib.sha1(text.encode()).hexdigest()[:12]
+
+
+def find_oracle(config: PlantConfig | None = None, box: SetpointBox | None = None, h_min: float = 100.0,
+                spec: ExperimentSpec = _SPEC, grid: int = 3, starts: int = 2, maxfev: int = 40,
+                penalty: float = 5.0, cache_dir: str | None = DEFAULT_CACHE_DIR) -> OracleResult:
+    """Maximize the deterministic plant's mean tension over ``box`` s.t. min altitude >= ``h_min`` (m).
+
+    Args:
+        config: plant configuration (disturbances are switched off here).
+        box: :class:`SetpointBox` (the controller's default).
+        grid: points per setpoint of the initial grid (>= 2).
+        starts: Nelder–Mead runs, from the best feasible grid points.
+        maxfev: evaluations per Nelder–Mead run.
+        penalty: kN per metre of altitude violation.
+        cache_dir: JSON cache directory (None: no cache).
+    """
+    from scipy.optimize import minimize
+    config = config or PlantConfig()
+    box = box or SetpointBox()
+    key = _key(config, box, h_min, spec, grid)
+    path = None if cache_dir is None else os.path.join(cache_dir, f"oracle_{key}.json")
+    if path and os.path.exists(path):
+        with open(path) as f:
+            return OracleResult(**json.load(f))
+    lo, hi = box.lower(), box.upper()
+    evals = []
+
+    def f(x):
+        xc = np.clip(x, 0.0, 1.0)
+        c = lo + xc * (hi - lo)
+        t, z = plant_performance(config, c, spec)
+        evals.append((t, z, c))
+        return -t + penalty * max(0.0, h_min - z) + 1e3 * float(np.sum((x - xc) ** 2))
+
+    pts = [np.array(p, dtype=float) for p in itertools.product(np.linspace(0, 1, grid), repeat=3)]
+    vals = [f(p) for p in pts]
+    for i in np.argsort(vals)[:starts]:
+        minimize(f, pts[i], method="Nelder-Mead",
+                 options={"maxfev": maxfev, "xatol": 0.01, "fatol": 0.05, "initial_simplex":
+                          np.clip(pts[i] + np.vstack([np.zeros(3), -0.25 * np.sign(pts[i] - 0.5 + 1e-9)
+                                                      * np.eye(3)]), 0, 1)})
+    feas = [e for e in evals if e[1] >= h_min] or evals
+    t, z, c = max(feas, key=lambda e: e[0])
+    res = OracleResult(c=c.tolist(), c_deg=np.degrees(c).tolist(), tension_kn=float(t), min_altitude=float(z),
+                       evaluations=len(evals), key=key)
+    if path:
+        os.makedirs(cache_dir, exist_ok=True)
+        with open(path, "w") as fh:
+            json.dump(asdict(res), fh, indent=1)
+    return res

@@ -1,0 +1,110 @@
+"""Kite + GMA glue: experiments from measurements, normalization, a short RTO run, determinism."""
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from kite_rto.core.closed_loop import make_closed_loop, run_closed_loop
+from kite_rto.core.experiment import ExperimentEvaluator, ExperimentSpec
+from kite_rto.core.kite_rto import KiteRTOSettings, RTOSession, make_kite_gma, model_only_optimum, run_kite_rto
+from kite_rto.core.oracle import plant_performance
+from kite_rto.core.path import Setpoints
+from kite_rto.core.plant import Measurement, PlantConfig
+
+
+def _synthetic(t, period=10.0, crashes=0, wind=8.0, tension=5e5, z=150.0):
+    phi = 0.5 * math.sin(2 * math.pi * t / period)
+    return Measurement(t=t, theta=0.5, phi=phi, psi=0.0, theta_dot=0.0, phi_dot=0.0, psi_dot=0.0,
+                       tension=tension, position=(0.0, 0.0, z), wind_ref=wind, delta=0.0, crashes=crashes,
+                       step=int(round(t / 0.05)))
+
+
+def test_evaluator_drops_settling_laps_and_averages_whole_laps():
+    spec = ExperimentSpec(settle_time=5.0, settle_laps=1, n_laps=2, h_min=100.0, w_nominal=8.0)
+    ev = ExperimentEvaluator(spec)
+    ev.start(0.0, [0.5, 0.6, 0.1])
+    out, t = None, 0.0
+    while out is None and t < 100:
+        t += 0.05
+        # the first 15 s fly at 300 kN / 120 m: the settle window plus the dropped lap; afterwards 500 kN / 150 m
+        late = t > 15.0
+        out = ev.update(_synthetic(t, tension=5e5 if late else 3e5, z=150.0 if late else 120.0))
+    assert out is not None and out.valid and not out.crashed and out.n_laps == 2
+    # laps start at t = 10, 20, 30 (upward zero crossings of phi); first counted start >= 5 s is t = 10 (dropped)
+    assert [round(lap.t_start) for lap in out.laps] == [20, 30]
+    assert out.cost == pytest.approx(-500.0, rel=1e-6)            # kN, normalized at the nominal wind
+    assert out.constraint == pytest.approx(100.0 - 150.0)          # m
+    assert out.t_end == pytest.approx(40.0, abs=0.1)
+    assert ev.update(_synthetic(t + 0.05)) is None                 # one outcome per start
+
+
+def test_evaluator_normalizes_by_measured_wind_and_flags_crash():
+    spec = ExperimentSpec(settle_time=0.0, settle_laps=0, n_laps=2, w_nominal=8.0)
+    ev = ExperimentEvaluator(spec)
+    ev.start(0.0)
+    out, t = None, 0.0
+    while out is None:
+        t += 0.05
+        out = ev.update(_synthetic(t, wind=10.0, tension=5e5))     # stronger wind: 500 kN * (8/10)^2 = 320 kN
+    assert out.cost == pytest.approx(-320.0, rel=1e-6) and out.mean_tension_kn == pytest.approx(500.0)
+    ev.start(t)
+    out = None
+    for _ in range(100):
+        t += 0.05
+        out = ev.update(_synthetic(t, crashes=1 if t > ev.t_start + 2.0 else 0))
+        if out is not None:
+            break
+    assert out is not None and out.crashed and not out.valid
+
+
+def test_normalization_reduces_lap_scatter_under_turbulence():
+    plant, ctl = make_closed_loop(Setpoints.from_degrees(30, 46, 7), PlantConfig(), seed=3)
+    laps = run_closed_loop(plant, ctl, 330.0, record=False).laps_after(30.0)
+    assert len(laps) >= 12
+    raw = np.array([lap.mean_tension for lap in laps])
+    norm = np.array([lap.tension_coefficient for lap in laps]) * 64.0
+    assert np.std(norm) < 0.5 * np.std(raw)
+
+
+@pytest.fixture(scope="module")
+def quick_settings():
+    return KiteRTOSettings(experiment=ExperimentSpec(settle_time=10.0, settle_laps=1, n_laps=2),
+                           fd_step=(0.1, 0.1, 0.1), filter_gain=0.8, trust_radius=0.3)
+
+
+def test_deterministic_rto_improves_on_model_only_optimum(quick_settings):
+    c0 = model_only_optimum()[0]
+    quiet = PlantConfig().without_disturbances()
+    res = run_kite_rto(quiet, seed=0, n_iter=3, settings=quick_settings)
+    assert not res.failed and res.crashes == 0 and len(res.records) == 3
+    assert np.allclose(res.iterates[0], c0)
+    t0, z0 = plant_performance(quiet, c0)
+    t3, z3 = plant_performance(quiet, res.iterates[-1])
+    assert t3 > t0 + 10.0                               # kN; model-only 574 kN, measured ~590 after 3 iterations
+    assert z3 >= 100.0
+    # the measured nominal tension increases iteration by iteration
+    nominal = [-r.cost for r in res.records]
+    assert nominal[-1] > nominal[0]
+
+
+def test_same_seed_same_setpoint_sequence(quick_settings):
+    settings = replace(quick_settings, experiment=replace(quick_settings.experiment, n_laps=1))
+    a = run_kite_rto(PlantConfig(), seed=5, n_iter=1, settings=settings)
+    b = run_kite_rto(PlantConfig(), seed=5, n_iter=1, settings=settings)
+    ca = [e.c for e in a.experiments] + [a.iterates[-1]]
+    cb = [e.c for e in b.experiments] + [b.iterates[-1]]
+    assert np.array_equal(np.array(ca), np.array(cb))
+    assert [e.outcome.cost for e in a.experiments] == [e.outcome.cost for e in b.experiments]
+
+
+def test_session_repeats_a_crashed_experiment(quick_settings):
+    gma = make_kite_gma(quick_settings)
+    session = RTOSession(gma, ExperimentSpec(settle_time=0.0, settle_laps=0, n_laps=1), max_repeats=2)
+    c = session.start(0.0)
+    assert np.allclose(c, gma.c)
+    t, again = 0.0, None
+    while again is None and t < 50:
+        t += 0.05
+        again = session.on_measurement(_synthetic(t, crashes=1 if t > 3.0 else 0))
+    assert again is not None and np.allclose(again, c) and session.repeats == 1 and not session.experiments
