@@ -180,7 +180,11 @@ class ControllerNode(Node):
         values = dict(zip(names, msg.position))
         c = [values[n] for n in Setpoints.names()]
         try:
-            accepted = self.controller.set_setpoints(c)
+            if self._last_stamp is None:       # nothing flown yet: start on the new path, no blend
+                self.controller = PathController(shared_model(), self.params, c, self.settings)
+                accepted = self.controller.setpoints
+            else:
+                accepted = self.controller.set_setpoints(c)
         except SetpointError as err:
             self.get_logger().warning(f"rejected setpoints: {err}; keeping {self._fmt(self.controller.setpoints)}",
                                       throttle_duration_sec=2.0)

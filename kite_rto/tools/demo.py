@@ -1,8 +1,10 @@
 """Main job: fly the kite graph as separate node processes in lockstep simulated time, then report.
 
-``fly`` (this stage): plant + controller at the default setpoints. It ends with the tracking quality, the mean
-tension per lap, and a plot of the flown path over the reference on the N-W plane (``runs/demo/path.png``) plus
-``runs/demo/summary.json``.
+``optimize`` (default): plant, controller and optimizer (GMA) as three processes; progress per experiment and
+iteration; ends with the per-iteration table, the optimality gap against the oracle, ``report.png`` and
+``summary.json`` in ``--out``.
+``fly``: plant + controller at the default setpoints; tracking quality, mean tension per lap and a plot of the
+flown path over the reference on the N-W plane (``path.png``).
 """
 from __future__ import annotations
 
@@ -23,6 +25,9 @@ def parse_args(argv=None):
     ap.add_argument("--seed", type=int, default=0, help="turbulence/noise seed (default 0)")
     ap.add_argument("--no-turbulence", action="store_true", help="steady wind, no measurement noise")
     ap.add_argument("--out", default="runs/demo", help="output folder (default runs/demo)")
+    ap.add_argument("--mode", choices=("optimize", "fly"), default="optimize", help="default: optimize")
+    ap.add_argument("--iterations", type=int, default=10, help="optimize: GMA iterations (default 10)")
+    ap.add_argument("--resume", action="store_true", help="optimize: continue the run in --out/rto.sqlite")
     return ap.parse_args(argv)
 
 
@@ -115,6 +120,9 @@ def main(argv=None) -> int:
     env = isolated_ros_env()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.mode == "optimize":
+        from .demo_optimize import optimize
+        return optimize(args, env, out)
     print(f"kite_rto demo: plant + controller, lockstep, {args.duration:.0f} s simulated, seed {args.seed}, "
           f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']} (node output in {out / 'nodes.log'})", flush=True)
     try:

@@ -1,0 +1,245 @@
+"""Optimizer node: Generalized Modifier Adaptation on the flying kite.
+
+Drives :class:`kite_rto.core.kite_rto.RTOSession` (the same per-sample logic as the pure runner): subscribes the
+plant's measurements (joined by stamp), runs GMA's nominal and perturbation experiments, publishes
+``/rto/setpoints`` (reliable + transient-local) and ``/rto/status`` (diagnostic_msgs), and writes every finished
+experiment and iteration to an SQLite database, from which a restarted optimizer resumes.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import UInt32
+
+from ..core.experiment import ExperimentSpec
+from ..core.kite_rto import KiteRTOSettings, RTOSession, make_kite_gma
+from ..core.params import KiteParams, ParameterError
+from ..core.path import Setpoints, SetpointError, validate_setpoints
+from ..gma import HistoryStore
+from .common import LATCHED, RELIABLE_10, ParamSpec, declare_params, finite_floats, run_node, stamp_to_ns
+from .controller_node import PARAMS as CONTROLLER_PARAMS
+from .controller_node import _box
+from .sample_join import SampleJoin
+from .topics import CRASHES, POSITION, SETPOINTS, STATE, STATUS, TENSION, WIND
+
+__all__ = ["OptimizerNode", "PARAMS", "main"]
+
+_S = KiteRTOSettings()
+_E = _S.experiment
+PARAMS = (
+    ParamSpec("db", "rto.sqlite", "SQLite file of experiments and iterations (resume source)"),
+    ParamSpec("resume", True, "continue from the database if it holds a run"),
+    ParamSpec("n_iter", 10, "GMA iterations to run; then hold the last setpoints (0 = no limit)", 0, 10000),
+    ParamSpec("exit_when_done", False, "exit (code 0) once n_iter iterations are done"),
+    ParamSpec("n_laps", _E.n_laps, "whole laps averaged per experiment", 1, 100),
+    ParamSpec("settle_laps", _E.settle_laps, "whole laps dropped after a setpoint change", 0, 100),
+    ParamSpec("settle_time", _E.settle_time, "s after a setpoint change before a lap may count", 0.0, 600.0),
+    ParamSpec("max_duration", _E.max_duration, "s; an experiment ends with what it has after this", 1.0, 1e5),
+    ParamSpec("normalize", _E.normalize, "normalize lap tension by the measured reference wind"),
+    ParamSpec("h_min", _E.h_min, "minimum altitude, m", 0.0, 1000.0),
+    ParamSpec("gradient", _S.gradient, "plant gradient estimation", choices=("forward", "central", "least_squares")),
+    ParamSpec("fd_step", float(_S.fd_step[0]), "finite-difference step, fraction of the box width", 0.01, 1.0),
+    ParamSpec("filter_gain", _S.filter_gain, "GMA input filter K", 0.01, 1.0),
+    ParamSpec("trust_radius", _S.trust_radius, "initial trust radius, fraction of the box width", 0.001, 10.0),
+    *[p for p in CONTROLLER_PARAMS if p.name.startswith("box_")],
+)
+
+
+class OptimizerNode(Node):
+    """Runs GMA experiments on the flying kite and publishes setpoints and status."""
+
+    def __init__(self, **kwargs):
+        super().__init__("optimizer", **kwargs)
+        v = self.p = declare_params(self, PARAMS)
+        try:
+            spec = replace(_E, n_laps=v["n_laps"], settle_laps=v["settle_laps"], settle_time=v["settle_time"],
+                           max_duration=v["max_duration"], normalize=v["normalize"], h_min=v["h_min"])
+            self.settings = replace(_S, experiment=spec, box=_box(v), gradient=v["gradient"],
+                                    fd_step=(v["fd_step"],) * 3, filter_gain=v["filter_gain"],
+                                    trust_radius=v["trust_radius"])
+        except ValueError as err:
+            raise ParameterError(str(err)) from None
+        self.store = HistoryStore(v["db"])
+        history = self.store.load() if v["resume"] else None
+        self.gma = make_kite_gma(self.settings, history=history)
+        if history is None:
+            self.store.save_history(self.gma.history)
+        self.session = RTOSession(self.gma, spec, self.settings.max_repeats)
+        self._saved_exp = len(self.gma.history.experiments)
+        self._saved_rec = len(self.gma.records)
+        self.join = SampleJoin()
+        self.pub_setpoints = self.create_publisher(JointState, SETPOINTS, LATCHED)
+        self.pub_status = self.create_publisher(DiagnosticArray, STATUS, RELIABLE_10)
+        self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10)
+        self.create_subscription(WrenchStamped, TENSION, self.tension_callback, RELIABLE_10)
+        self.create_subscription(PointStamped, POSITION, self.position_callback, RELIABLE_10)
+        self.create_subscription(Vector3Stamped, WIND, self.wind_callback, RELIABLE_10)
+        self.create_subscription(UInt32, CRASHES, self.crashes_callback, LATCHED)
+        self.create_timer(1.0, self.publish_status, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._last_stamp = -1
+        self._started = False
+        self.done = False
+        self.phase = "waiting for the plant"
+        first = self.gma.next_request()
+        if history is not None:
+            self.get_logger().info(f"resumed from {v['db']}: {len(history.experiments)} experiments, "
+                                   f"{len(history.iterations)} iterations")
+        self.publish_setpoints(first.c)
+        self.get_logger().info(f"optimizer up: first experiment {first.request_id}")
+
+    # ------------------------------------------------------------ measurements
+    def state_callback(self, msg: JointState) -> None:
+        pos = finite_floats(msg.position, 3)
+        if pos is None:
+            return self._reject("state", list(msg.position), "3 finite angles (rad)")
+        self._part(msg.header.stamp, "state", pos)
+
+    def tension_callback(self, msg: WrenchStamped) -> None:
+        v = msg.wrench.force.x
+        if not (math.isfinite(v) and v >= 0.0):
+            return self._reject("tension", v, "a finite force >= 0 N")
+        self._part(msg.header.stamp, "tension", v)
+
+    def position_callback(self, msg: PointStamped) -> None:
+        p = finite_floats((msg.point.x, msg.point.y, msg.point.z), 3)
+        if p is None:
+            return self._reject("position", p, "a finite point in m")
+        self._part(msg.header.stamp, "position", tuple(p))
+
+    def wind_callback(self, msg: Vector3Stamped) -> None:
+        v = msg.vector.x
+        if not (math.isfinite(v) and 0.0 <= v < 100.0):
+            return self._reject("wind", v, "a finite speed in [0, 100) m/s")
+        self._part(msg.header.stamp, "wind", v)
+
+    def crashes_callback(self, msg: UInt32) -> None:
+        self.join.crashes = int(msg.data)
+
+    def _part(self, stamp_msg, part: str, value) -> None:
+        stamp = stamp_to_ns(stamp_msg)
+        if part == "state" and 0 <= stamp < self._last_stamp:
+            self.get_logger().warning(f"sim time jumped back to {stamp * 1e-9:.2f} s: plant restarted, the current "
+                                      "experiment starts again")
+            self.join.reset()
+            self._last_stamp = -1
+            self._started = False
+        if part == "state":
+            self._last_stamp = max(self._last_stamp, stamp)
+        m = self.join.add(stamp, part, value)
+        if m is not None:
+            self.on_sample(m)
+
+    def on_sample(self, m) -> None:
+        if self.done:
+            return
+        if not self._started:
+            self._started = True
+            if self.session.request is None:
+                self.publish_setpoints(self.session.start(m.t))
+            else:                                   # plant restart: same request, measured again
+                self.session.evaluator.start(m.t, self.session.c)
+            self.phase = "experiment"
+            return
+        new = self.session.on_measurement(m)
+        self._persist()
+        if self.session.failed:
+            self.phase = f"failed: {self.session.failed}"
+            self.get_logger().error(self.phase)
+            self.done = True
+        elif self.p["n_iter"] and len(self.gma.records) >= self.p["n_iter"]:
+            self.finish()
+        elif new is not None:
+            self.publish_setpoints(new)
+
+    def _persist(self) -> None:
+        exps = self.gma.history.experiments
+        for req, res in exps[self._saved_exp:]:
+            self.store.save_experiment(req, res)
+            self.get_logger().info(f"experiment {req.request_id}: tension {-res.cost:.1f} kN, "
+                                   f"g = {res.constraints[0]:+.1f} m, c = {self._deg(req.c)}")
+        self._saved_exp = len(exps)
+        for rec in self.gma.records[self._saved_rec:]:
+            self.store.save_iteration(rec, self.gma.history.pending)
+            self.get_logger().info(f"iteration {rec.k}: c_k = {self._deg(rec.c_k)} -> c_next = {self._deg(rec.c_next)}"
+                                   f" ({rec.decision})")
+            self.publish_status()
+        self._saved_rec = len(self.gma.records)
+
+    def finish(self) -> None:
+        rec = self.gma.records[-1]
+        self.publish_setpoints(rec.c_next)
+        self.done = True
+        self.phase = "done"
+        self.publish_status()
+        self.get_logger().info(f"done: {len(self.gma.records)} iterations; holding c = {self._deg(rec.c_next)}")
+        if self.p["exit_when_done"]:
+            raise SystemExit(0)
+
+    # ----------------------------------------------------------------- output
+    def publish_setpoints(self, c) -> None:
+        """Publish ``c`` (rad) after checking it against the safe box and the controller's turn limit."""
+        box = self.settings.box
+        try:
+            validate_setpoints(np.asarray(c, dtype=float), box, KiteParams())
+        except SetpointError as err:
+            self.get_logger().error(f"refusing to publish unsafe setpoints: {err}")
+            self.session.failed = f"unsafe setpoints requested: {err}"
+            self.done = True
+            return
+        msg = JointState()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.name = Setpoints.names()
+        msg.position = [float(x) for x in c]
+        self.pub_setpoints.publish(msg)
+
+    def publish_status(self) -> None:
+        st = DiagnosticStatus(name="kite_rto/optimizer", hardware_id="kite_rto")
+        st.level = DiagnosticStatus.ERROR if self.session.failed else DiagnosticStatus.OK
+        st.message = self.phase
+        req = self.session.request
+        kv = {"iteration": len(self.gma.records), "phase": self.phase,
+              "experiments_done": len(self.gma.history.experiments)}
+        if req is not None:
+            kv.update(experiment=req.request_id, purpose=req.purpose, setpoints_deg=self._deg(req.c),
+                      experiment_t_start=f"{self.session.evaluator.t_start:.2f}")
+        if self.gma.records:
+            r = self.gma.records[-1]
+            kv.update(measured_cost_kN=f"{r.cost:.2f}", measured_constraint_m=f"{r.constraints[0]:.2f}",
+                      grad_cost=self._vec(r.grad_cost), grad_constraint=self._vec(r.jac_constraints.ravel()),
+                      eps=self._vec(r.eps), lambda_=self._vec(r.lam), mu=self._vec(r.mu.ravel()),
+                      c_star_deg=self._deg(r.c_star), c_next_deg=self._deg(r.c_next), decision=r.decision)
+        st.values = [KeyValue(key=k.rstrip("_"), value=str(v)) for k, v in kv.items()]
+        msg = DiagnosticArray(status=[st])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.pub_status.publish(msg)
+
+    def _reject(self, what, value, expected) -> None:
+        self.get_logger().warning(f"rejected {what} message {value!r}: expected {expected}", throttle_duration_sec=2.0)
+
+    @staticmethod
+    def _deg(c) -> str:
+        return "(" + ", ".join(f"{math.degrees(x):.2f}" for x in np.asarray(c, dtype=float)) + ") deg"
+
+    @staticmethod
+    def _vec(v) -> str:
+        return "[" + ", ".join(f"{x:.4g}" for x in np.asarray(v, dtype=float).ravel()) + "]"
+
+    def destroy_node(self):
+        self.store.close()
+        return super().destroy_node()
+
+
+def main(args=None) -> None:
+    raise SystemExit(run_node(OptimizerNode, args))
+
+
+if __name__ == "__main__":
+    main()
