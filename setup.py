@@ -25,6 +25,7 @@ setup(
             "plant = kite_rto.nodes.plant_node:main",
             "echo_pilot = kite_rto.nodes.echo_pilot:main",
             "controller = kite_rto.nodes.controller_node:main",
+            "optimizer = kite_rto.nodes.optimizer_node:main",
         ],
     },
 )
