@@ -23,6 +23,7 @@ PLANT_PARAMS = KiteParams(E=4.6, c_E=2.0, g_s=0.035, shear=0.20)
 """Default 'real kite': lower glide ratio, glide loss when steering, weaker steering, stronger shear (SPEC §2)."""
 
 _MODEL = None
+_isfinite = math.isfinite
 
 
 def shared_model() -> KiteModel:
@@ -125,6 +126,77 @@ class Measurement:
         return self.position[2]
 
 
+_new = object.__new__
+
+
+def _measurement(t, theta, phi, psi, theta_dot, phi_dot, psi_dot, tension, position, wind_ref, delta, crashes,
+                 step) -> Measurement:
+    """Build a :class:`Measurement` without the frozen dataclass's per-field ``object.__setattr__`` (3-4x faster).
+
+    The result is an ordinary ``Measurement`` (same fields, ``==``, ``hash``, ``repr``, ``replace``).
+    """
+    m = _new(Measurement)
+    m.__dict__.update(t=t, theta=theta, phi=phi, psi=psi, theta_dot=theta_dot, phi_dot=phi_dot, psi_dot=psi_dot,
+                      tension=tension, position=position, wind_ref=wind_ref, delta=delta, crashes=crashes,
+                      step=step)
+    return m
+
+
+class _BlockTurbulence(Turbulence):
+    """:class:`~kite_rto.core.wind.Turbulence` with the per-sample cost of its random draws removed.
+
+    Same random stream, same draws in the same order, same floating-point operations, hence bit-for-bit the same
+    gusts and anemometer readings; the normals are only drawn from the generator in blocks (a NumPy ``Generator``
+    yields the same sequence whether drawn one by one or as an array) instead of one NumPy call per draw.
+    ``benchmarks/bench_plant.py`` checks the equivalence against the base class.
+    """
+
+    _BLOCK = 256
+
+    def __init__(self, settings: TurbulenceSettings, w_ref: float, rng: np.random.Generator):
+        super().__init__(settings, w_ref, rng)
+        rho = settings.anemometer_correlation
+        self._rho = rho
+        self._rho_c = math.sqrt(1.0 - rho**2)
+        self._noise_std = settings.anemometer_noise
+        self._period = settings.update_period
+        self._z: list = []
+        self._zi = 0
+
+    def _normal(self) -> float:
+        zi = self._zi
+        if zi >= len(self._z):
+            self._z = self._rng.standard_normal(self._BLOCK).tolist()
+            zi = 0
+        self._zi = zi + 1
+        return self._z[zi]
+
+    def advance(self, t: float) -> None:
+        if not self.settings.enabled:
+            return
+        a, b = self._a, self._b
+        while t >= self._next_update - 1e-12:
+            n1 = self._normal()
+            n2 = self._normal()
+            self.gust = a * self.gust + b * n1
+            self._own = a * self._own + b * n2
+            self._next_update += self._period
+
+    def anemometer(self) -> float:
+        gust = self._rho * self.gust + self._rho_c * self._own
+        if self._noise_std > 0:
+            zi = self._zi                       # inlined _normal()
+            if zi >= len(self._z):
+                self._z = self._rng.standard_normal(self._BLOCK).tolist()
+                zi = 0
+            self._zi = zi + 1
+            noise = 0.0 + self._noise_std * self._z[zi]      # what Generator.normal(0.0, std) computes
+        else:
+            noise = 0.0
+        w = self.w_ref0 + gust + noise
+        return 0.0 if 0.0 > w else w            # max(w, 0.0), NaN included
+
+
 class KitePlant:
     """Fixed-step simulation of the real kite.
 
@@ -139,13 +211,18 @@ class KitePlant:
         self.model = shared_model()
         self.dt = self.config.dt
         gust_ss, noise_ss = np.random.SeedSequence(self.seed).spawn(2)
-        self.turbulence = Turbulence(self.config.turbulence, self.config.params.w_ref,
-                                     np.random.default_rng(gust_ss))
+        self.turbulence = _BlockTurbulence(self.config.turbulence, self.config.params.w_ref,
+                                           np.random.default_rng(gust_ss))
         self._noise_rng = np.random.default_rng(noise_ss)
         self._p = self.config.params.as_vector()
         self._i_wref = KiteParams.names().index("w_ref")
         self._h = self.dt / self.config.substeps
         self._delay = deque([0.0] * round(self.config.dead_time / self.dt))
+        self._max_change = self.config.rate_limit * self.dt
+        self._substeps = range(self.config.substeps)
+        nz = self.config.noise
+        self._noise_std = (nz.angle, nz.rate, nz.tension)
+        self._step_py = self.model.step_py
         self.state = list(self.config.launch_state)
         self.applied_delta = 0.0
         self.t = 0.0
@@ -163,25 +240,42 @@ class KitePlant:
 
     def step(self, delta: float) -> Measurement:
         """Send steering command ``delta`` (clipped to [-1, 1]; NaN counts as 0) and advance one sample."""
+        # Hot path (tens of thousands of calls per simulated hour): locals, no per-call NumPy, no helper calls.
         d = float(delta)
-        d = 0.0 if d != d else min(max(d, -1.0), 1.0)
-        if self._delay:
-            self._delay.append(d)
-            d = self._delay.popleft()
-        max_change = self.config.rate_limit * self.dt
-        self.applied_delta += min(max(d - self.applied_delta, -max_change), max_change)
+        if d != d:
+            d = 0.0
+        elif d < -1.0:
+            d = -1.0
+        elif d > 1.0:
+            d = 1.0
+        delay = self._delay
+        if delay:
+            delay.append(d)
+            d = delay.popleft()
+        mc = self._max_change
+        change = d - self.applied_delta
+        if change < -mc:
+            change = -mc
+        elif change > mc:
+            change = mc
+        self.applied_delta += change
         self.k += 1
-        self.t = self.k * self.dt
-        self.turbulence.advance(self.t)
-        self._p[self._i_wref] = self.turbulence.reference_wind()
+        t = self.t = self.k * self.dt
+        turb = self.turbulence
+        if t >= turb._next_update - 1e-12:
+            turb.advance(t)
+        w = turb.w_ref0 + turb.gust
+        p = self._p
+        p[self._i_wref] = 0.1 if 0.1 > w else w         # Turbulence.reference_wind(): max(w, 0.1)
         x = self.state
-        for _ in range(self.config.substeps):
-            x, out = self.model.step_py(x, self.applied_delta, self._p, self._h)
+        ad, h, step_py = self.applied_delta, self._h, self._step_py
+        for _ in self._substeps:
+            x, out = step_py(x, ad, p, h)
         self.state, self._out = x, out
-        if not (out[1] > 0.0 and all(map(math.isfinite, x)) and all(map(math.isfinite, out))):
+        if not (out[1] > 0.0 and all(map(_isfinite, x)) and all(map(_isfinite, out))):
             self._relaunch()
-        self._last = self._measure()
-        return self._last
+        m = self._last = self._measure()
+        return m
 
     def reset(self) -> Measurement:
         """Relaunch from the launch state (crash count and time are kept)."""
@@ -209,12 +303,15 @@ class KitePlant:
         return self._noise[self._ni - 1]
 
     def _measure(self) -> Measurement:
-        nz = self.config.noise
-        e = self._draw()
+        ni = self._ni                                   # inlined _draw()
+        if ni >= len(self._noise):
+            self._noise = self._noise_rng.standard_normal((1024, 7)).tolist()
+            ni = 0
+        self._ni = ni + 1
+        e0, e1, e2, e3, e4, e5, e6 = self._noise[ni]
         x, out = self.state, self._out
-        sa, sr = nz.angle, nz.rate
-        return Measurement(
-            t=self.t, theta=x[0] + sa * e[0], phi=x[1] + sa * e[1], psi=x[2] + sa * e[2],
-            theta_dot=out[6] + sr * e[3], phi_dot=out[7] + sr * e[4], psi_dot=out[8] + sr * e[5],
-            tension=out[0] * (1.0 + nz.tension * e[6]), position=(out[3], out[4], out[5]),
-            wind_ref=self.turbulence.anemometer(), delta=self.applied_delta, crashes=self.crashes, step=self.k)
+        sa, sr, st = self._noise_std
+        return _measurement(self.t, x[0] + sa * e0, x[1] + sa * e1, x[2] + sa * e2,
+                            out[6] + sr * e3, out[7] + sr * e4, out[8] + sr * e5,
+                            out[0] * (1.0 + st * e6), (out[3], out[4], out[5]),
+                            self.turbulence.anemometer(), self.applied_delta, self.crashes, self.k)

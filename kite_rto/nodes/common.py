@@ -1,7 +1,17 @@
-"""Shared node plumbing: QoS profiles, stamps, declared parameters, and the ``main`` wrapper."""
+"""Shared node plumbing: QoS profiles, stamps, declared parameters, the ``main`` wrapper, and fast message I/O.
+
+Fast message I/O (for the lockstep hot path, where rclpy's per-message Python cost dominates): a
+:class:`MessageTemplate` serializes a stamped message whose strings and sequence lengths never change by patching
+the stamp and the float64 values into the RMW's own serialization of an example message (verified byte for byte
+against ``rclpy.serialization.serialize_message`` at construction, else it falls back to building the message);
+:func:`joint_state_from_raw` reads stamp and positions from a raw (serialized) ``sensor_msgs/JointState``. The
+wire format, types and QoS are unchanged: subscribers see ordinary messages.
+"""
 from __future__ import annotations
 
 import math
+import os
+import struct
 import sys
 from dataclasses import dataclass
 
@@ -11,11 +21,13 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import JointState
 
 from ..core.params import ParameterError
 
 __all__ = ["RELIABLE_10", "LATCHED", "ParamSpec", "declare_params", "stamp_to_ns", "ns_to_stamp",
-           "finite_floats", "run_node"]
+           "finite_floats", "run_node", "request_exit", "MessageTemplate", "cdr_serialize", "joint_state_from_raw"]
 
 RELIABLE_10 = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.VOLATILE)
@@ -107,17 +119,80 @@ def finite_floats(values, n: int | None = None) -> list | None:
     return out
 
 
-def run_node(factory, args=None) -> int:
+EXECUTOR_ENV = "KITE_RTO_EXECUTOR"
+"""Environment variable: ``single`` forces rclpy's SingleThreadedExecutor where :func:`run_node` would use the
+events executor (``events``, the default for nodes that opt in)."""
+
+
+def request_exit(node, code: int = 0) -> None:
+    """Make the node's process exit with ``code`` once the current callback returns.
+
+    Under :func:`run_node`'s events executor loop this only sets a flag (an exception escaping a callback would be
+    logged as FATAL by the C++ executor); under ``rclpy.spin(node)`` or any other executor it raises
+    :class:`SystemExit`, which propagates out of the spin call as before. Callbacks should return right after it.
+    """
+    if getattr(node, "_kite_run_loop", False):
+        node._kite_exit_code = code
+        return
+    raise SystemExit(code)
+
+
+def exit_requested(node) -> bool:
+    """True once :func:`request_exit` was called for ``node`` under the events executor loop."""
+    return getattr(node, "_kite_exit_code", None) is not None
+
+
+def _events_executor(context):
+    """rclpy's C++ events executor (Jazzy: ``rclpy.experimental``), or None when unavailable or disabled."""
+    if os.environ.get(EXECUTOR_ENV, "events").strip().lower() in ("single", "singlethreaded", "default"):
+        return None
+    try:
+        from rclpy.experimental import EventsExecutor
+    except ImportError:
+        return None
+    return EventsExecutor(context=context)
+
+
+def _spin_events(node, executor) -> int:
+    # The Jazzy backport's ``EventsExecutor.spin()`` holds the GIL while it waits and did not dispatch timers on
+    # these machines (signals and other threads starve); ``spin_once`` with a timeout works: the GIL is released
+    # while waiting, timers (also STEADY_TIME ones) fire, Ctrl-C raises KeyboardInterrupt here.
+    node._kite_run_loop = True
+    node._kite_exit_code = None
+    executor.add_node(node)
+    ok = node.context.ok
+    spin_once = executor.spin_once
+    try:
+        while ok():
+            spin_once(timeout_sec=0.25)
+            if node._kite_exit_code is not None:
+                return node._kite_exit_code
+        return 0
+    finally:
+        try:
+            executor.remove_node(node)
+        except Exception:  # noqa: BLE001 - best effort at shutdown
+            pass
+
+
+def run_node(factory, args=None, *, events: bool = False) -> int:
     """Init rclpy, build the node with ``factory()``, spin, shut down; return the process exit code.
 
-    A :class:`ParameterError` at construction is reported on stderr and gives exit code 2.
+    A :class:`ParameterError` at construction is reported on stderr and gives exit code 2. With ``events=True``
+    the node is spun by rclpy's C++ events executor (several times less overhead per callback than the
+    SingleThreadedExecutor; no coroutine callbacks), unless ``KITE_RTO_EXECUTOR=single`` is set or it is not
+    available; the node should then end with :func:`request_exit` rather than raising ``SystemExit``.
     """
     rclpy.init(args=args)
     node = None
     code = 0
     try:
         node = factory()
-        rclpy.spin(node)
+        executor = _events_executor(node.context) if events else None
+        if executor is not None:
+            code = _spin_events(node, executor)
+        else:
+            rclpy.spin(node)
     except ParameterError as exc:
         print(f"[kite_rto] refusing to start: {exc}", file=sys.stderr, flush=True)
         code = 2
@@ -130,3 +205,209 @@ def run_node(factory, args=None) -> int:
             node.destroy_node()
         rclpy.try_shutdown()
     return code
+
+
+# ------------------------------------------------------------------------------------------ fast message I/O
+_ENDIAN = {b"\x00\x01": "<", b"\x00\x00": ">"}     # CDR encapsulation: little / big endian, plain CDR
+_SENTINEL_SEC, _SENTINEL_NSEC = 0x2A3B4C5D, 0x1E2F3A4B
+
+
+class MessageTemplate:
+    """Serialize ``build(stamp, values)`` fast for messages whose layout does not depend on the values.
+
+    ``build(stamp: builtin_interfaces/Time, values: list[float]) -> message`` is the readable reference. At
+    construction the template serializes ``build`` with sentinel stamp and values, finds where they sit in the
+    bytes, and compiles one ``struct`` format (constant bytes + stamp + float64s). It is used only if, for test
+    values, its bytes deserialize (``rclpy.serialization``, i.e. the RMW's own type support) to a message equal
+    to ``build(...)``; otherwise :meth:`__call__` returns ``build(...)``'s message object. Either result can be
+    given to ``Publisher.publish``. (The example is serialized by :func:`cdr_serialize` rather than rclpy's
+    ``serialize_message``, because rmw_fastrtps leaves CDR alignment padding uninitialized there.)
+    """
+
+    def __init__(self, build, n_values: int):
+        self.build = build
+        self.n_values = n_values
+        self._pack = None
+        try:
+            pack = self._compile()
+            if pack is not None and self._verify(pack):
+                self._pack = pack
+        except Exception:  # noqa: BLE001 - any surprise: use the plain path
+            self._pack = None
+
+    @property
+    def fast(self) -> bool:
+        """True when the compiled serializer is in use."""
+        return self._pack is not None
+
+    def __call__(self, stamp_ns: int, values):
+        """Serialized message (``bytes``) or, on the fallback path, the message object."""
+        sec, nsec = divmod(stamp_ns, 1_000_000_000)
+        if self._pack is not None:
+            return self._pack(sec, nsec, *values)
+        return self.build(Time(sec=sec, nanosec=nsec), list(values))
+
+    def _compile(self):
+        values = [math.ldexp(1.0 + (i + 1) / 64.0, -700 + 3 * i) for i in range(self.n_values)]
+        ref = cdr_serialize(self.build(Time(sec=_SENTINEL_SEC, nanosec=_SENTINEL_NSEC), values))
+        e = _ENDIAN.get(bytes(ref[:2]))
+        if e is None:
+            return None
+        fields = [(ref.find(struct.pack(e + "iI", _SENTINEL_SEC, _SENTINEL_NSEC)), "iI", 8)]
+        fields += [(ref.find(struct.pack(e + "d", v)), "d", 8) for v in values]
+        offsets = [f[0] for f in fields]
+        if min(offsets) < 0 or offsets != sorted(offsets):
+            return None                 # not found, or not in argument order: use the fallback
+        fmt, args, consts, pos = e, [], {}, 0
+        names = ["sec", "nsec"] + [f"v{i}" for i in range(self.n_values)]
+        k = 0
+        for off, code, size in fields:
+            if off < pos:
+                return None
+            if off > pos:
+                fmt += f"{off - pos}s"
+                consts[f"_c{len(consts)}"] = bytes(ref[pos:off])
+                args.append(f"_c{len(consts) - 1}")
+            fmt += code
+            n = len(code)
+            args += names[k:k + n]
+            k += n
+            pos = off + size
+        if pos < len(ref):
+            fmt += f"{len(ref) - pos}s"
+            consts[f"_c{len(consts)}"] = bytes(ref[pos:])
+            args.append(f"_c{len(consts) - 1}")
+        ns = {"_p": struct.Struct(fmt).pack, **consts}
+        binds = ", ".join(f"{c}={c}" for c in ["_p", *consts])
+        src = f"def pack({', '.join(names)}, {binds}):\n    return _p({', '.join(args)})\n"
+        exec(src, ns)  # noqa: S102 - source generated above from field offsets
+        return ns["pack"]
+
+    def _verify(self, pack) -> bool:
+        tests = [(0, 0, [0.0] * self.n_values),
+                 (1_234_567, 999_999_999, [(-1.0) ** i * (i + 0.1) * 1e3 for i in range(self.n_values)]),
+                 (2**31 - 1, 5, [math.pi / (i + 1) for i in range(self.n_values)])]
+        for sec, nsec, v in tests:
+            data = pack(sec, nsec, *v)
+            msg = self.build(Time(sec=sec, nanosec=nsec), list(v))
+            if deserialize_message(data, type(msg)) != msg:
+                return False
+        return True
+
+
+_PRIM = {"boolean": "?", "octet": "B", "char": "B", "uint8": "B", "int8": "b", "int16": "h", "uint16": "H",
+         "int32": "i", "uint32": "I", "int64": "q", "uint64": "Q", "float": "f", "double": "d"}
+
+
+def cdr_serialize(msg) -> bytes:
+    """Plain little-endian CDR (what Fast DDS and Cyclone DDS put on the wire for ROS 2 messages), zero padding.
+
+    Covers primitives, strings, nested messages and unbounded sequences of those; raises ``TypeError`` for other
+    field types (wstring, fixed arrays, bounded types are not needed here). :class:`MessageTemplate` checks the
+    result against the RMW's deserializer before using it.
+    """
+    out = bytearray(b"\x00\x01\x00\x00")
+
+    def align(n):
+        out.extend(bytes(-(len(out) - 4) % n))
+
+    def prim(code, value):
+        size = struct.calcsize(code)
+        align(size)
+        out.extend(struct.pack("<" + code, value))
+
+    def string(value):
+        data = value.encode() + b"\x00"
+        prim("I", len(data))
+        out.extend(data)
+
+    def write(typ, value):
+        if typ in _PRIM:
+            prim(_PRIM[typ], value)
+        elif typ == "string":
+            string(value)
+        elif typ.startswith("sequence<") and typ.endswith(">") and "," not in typ:
+            inner = typ[9:-1]
+            prim("I", len(value))
+            for v in value:
+                write(inner, v)
+        elif "/" in typ and "<" not in typ and "[" not in typ:
+            for name, t in value.get_fields_and_field_types().items():
+                write(t, getattr(value, name))
+        else:
+            raise TypeError(f"cdr_serialize: field type {typ!r} not supported")
+
+    for name, t in msg.get_fields_and_field_types().items():
+        write(t, getattr(msg, name))
+    return bytes(out)
+
+
+def _cdr_joint_state(raw: bytes):
+    """(stamp ns, position tuple) from plain-CDR ``sensor_msgs/JointState`` bytes; None if not parseable."""
+    e = _ENDIAN.get(bytes(raw[:2]))
+    if e is None or len(raw) < 16:
+        return None
+    unpack = struct.unpack_from
+    sec, nsec = unpack(e + "iI", raw, 4)
+    (n,) = unpack(e + "I", raw, 12)                    # header.frame_id
+    o = 16 + n
+    o = 4 + ((o - 4 + 3) & ~3)
+    (count,) = unpack(e + "I", raw, o)                  # name[]
+    o += 4
+    if count > len(raw):
+        return None
+    for _ in range(count):
+        o = 4 + ((o - 4 + 3) & ~3)
+        (n,) = unpack(e + "I", raw, o)
+        o += 4 + n
+    o = 4 + ((o - 4 + 3) & ~3)
+    (count,) = unpack(e + "I", raw, o)                  # position[]
+    o += 4
+    if count > len(raw):
+        return None
+    if count:
+        o = 4 + ((o - 4 + 7) & ~7)
+    position = unpack(f"{e}{count}d", raw, o)
+    return sec * 1_000_000_000 + nsec, position
+
+
+def _cdr_reader_ok() -> bool:
+    """Check :func:`_cdr_joint_state` against rclpy's deserializer on this RMW."""
+    try:
+        for stamp, frame, names, pos in ((0, "", [], []), (3_000_000_123, "anchor", ["theta", "phi", "psi"],
+                                                              [0.1, -0.2, 3.0]),
+                                         (7, "ab", ["delta"], [0.5]), (2**31 - 1, "abcde", ["a", "bcdefg"], [1e300])):
+            msg = JointState(name=names, position=pos, velocity=[1.0] * len(pos))
+            msg.header.stamp = ns_to_stamp(stamp)
+            msg.header.frame_id = frame
+            if _cdr_joint_state(serialize_message(msg)) != (stamp, tuple(pos)):
+                return False
+        return True
+    except (struct.error, TypeError, ValueError):
+        return False
+
+
+_CDR_READER_OK = None
+
+
+def joint_state_from_raw(raw: bytes) -> tuple[int, tuple]:
+    """Stamp (integer ns) and positions of a raw ``sensor_msgs/JointState`` (a ``raw=True`` subscription's bytes).
+
+    Reads plain CDR directly (checked once against rclpy's deserializer); anything else is deserialized by rclpy.
+    Raises ``ValueError`` for bytes that are not a JointState.
+    """
+    global _CDR_READER_OK
+    if _CDR_READER_OK is None:
+        _CDR_READER_OK = _cdr_reader_ok()
+    if _CDR_READER_OK:
+        try:
+            r = _cdr_joint_state(raw)
+        except struct.error:
+            r = None
+        if r is not None:
+            return r
+    try:
+        msg = deserialize_message(raw, JointState)
+    except Exception as exc:  # noqa: BLE001 - rclpy raises various errors for garbage
+        raise ValueError(f"not a sensor_msgs/JointState: {exc}") from exc
+    return stamp_to_ns(msg.header.stamp), tuple(msg.position)

@@ -21,7 +21,8 @@ from sensor_msgs.msg import JointState
 from ..core.params import KiteParams
 from ..core.plant import PLANT_PARAMS, KitePlant, NoiseSettings, PlantConfig
 from ..core.wind import TurbulenceSettings
-from .common import RELIABLE_10, ParamSpec, declare_params, finite_floats, ns_to_stamp, run_node, stamp_to_ns
+from .common import (RELIABLE_10, MessageTemplate, ParamSpec, declare_params, finite_floats, joint_state_from_raw,
+                     request_exit, run_node, stamp_to_ns)
 from .topics import CLOCK, POSITION, STATE, STEERING, TENSION, WIND
 
 __all__ = ["PlantNode", "PARAMS", "main"]
@@ -69,6 +70,41 @@ def config_from_params(v: dict) -> PlantConfig:
                        launch_state=(math.radians(v["launch_theta_deg"]), 0.0, 0.0))
 
 
+def _state_msg(stamp, v) -> JointState:
+    s = JointState(name=["theta", "phi", "psi"], position=v[:3], velocity=v[3:])
+    s.header.stamp = stamp
+    s.header.frame_id = "anchor"
+    return s
+
+
+def _position_msg(stamp, v) -> PointStamped:
+    p = PointStamped()
+    p.header.stamp = stamp
+    p.header.frame_id = "anchor"
+    p.point.x, p.point.y, p.point.z = v
+    return p
+
+
+def _tension_msg(stamp, v) -> WrenchStamped:
+    w = WrenchStamped()
+    w.header.stamp = stamp
+    w.header.frame_id = "tether"
+    w.wrench.force.x = v[0]
+    return w
+
+
+def _wind_msg(stamp, v) -> Vector3Stamped:
+    w = Vector3Stamped()
+    w.header.stamp = stamp
+    w.header.frame_id = "anchor"
+    w.vector.x = v[0]
+    return w
+
+
+def _clock_msg(stamp, v) -> ClockMsg:
+    return ClockMsg(clock=stamp)
+
+
 class PlantNode(Node):
     """Publishes /clock and the kite's measurements; subscribes /kite/steering."""
 
@@ -84,7 +120,15 @@ class PlantNode(Node):
         self.pub_position = self.create_publisher(PointStamped, POSITION, RELIABLE_10)
         self.pub_tension = self.create_publisher(WrenchStamped, TENSION, RELIABLE_10)
         self.pub_wind = self.create_publisher(Vector3Stamped, WIND, RELIABLE_10)
-        self.create_subscription(JointState, STEERING, self.steering_callback, RELIABLE_10)
+        self.create_subscription(JointState, STEERING, self.steering_callback, RELIABLE_10, raw=True)
+        # The sample's messages (see the builders above), serialized fast when the RMW allows it.
+        self._msg_clock = MessageTemplate(_clock_msg, 0)
+        self._msg_state = MessageTemplate(_state_msg, 6)
+        self._msg_position = MessageTemplate(_position_msg, 3)
+        self._msg_tension = MessageTemplate(_tension_msg, 1)
+        self._msg_wind = MessageTemplate(_wind_msg, 1)
+        self._finished = False
+        self._first_answer = None          # (wall time, step) of the first accepted command: throughput log
         self._delta = 0.0                 # last valid command (realtime zero-order hold)
         self._last_command = time.monotonic()
         self._last_publish = time.monotonic()
@@ -100,13 +144,23 @@ class PlantNode(Node):
         self.get_logger().info(f"plant up: mode={self.p['mode']} dt={self.p['dt']} s seed={self.p['seed']}")
 
     # -------------------------------------------------------------- callbacks
-    def steering_callback(self, msg: JointState) -> None:
-        values = finite_floats(msg.position, 1)
+    def steering_callback(self, msg) -> None:
+        """A steering command: raw bytes from the node's own subscription, or a JointState."""
+        if self._finished:
+            return
+        try:
+            if isinstance(msg, JointState):
+                stamp, position = stamp_to_ns(msg.header.stamp), msg.position
+            else:
+                stamp, position = joint_state_from_raw(msg)
+        except ValueError as exc:
+            self.get_logger().warning(f"rejected steering: {exc}", throttle_duration_sec=2.0)
+            return
+        values = finite_floats(position, 1)
         if values is None or abs(values[0]) > 1.0:
-            self.get_logger().warning(f"rejected steering {list(msg.position)!r}: expected one finite delta in "
+            self.get_logger().warning(f"rejected steering {list(position)!r}: expected one finite delta in "
                                       "[-1, 1]", throttle_duration_sec=2.0)
             return
-        stamp = stamp_to_ns(msg.header.stamp)
         now = self.plant.k * self._dt_ns
         if self._lockstep:
             if stamp != now:
@@ -126,6 +180,8 @@ class PlantNode(Node):
         Before the first command ever arrives the plant only waits (and re-publishes), so a lockstep run does
         not depend on how long the controller takes to start.
         """
+        if self._finished:
+            return
         now = time.monotonic()
         if self._commands and now - self._last_command > self.p["command_timeout"]:
             self._fly_neutral()
@@ -134,6 +190,8 @@ class PlantNode(Node):
             self.publish_sample()
 
     def realtime_callback(self) -> None:
+        if self._finished:
+            return
         if time.monotonic() - self._last_command > self.p["command_timeout"]:
             self._fly_neutral()
             self._delta = 0.0
@@ -147,12 +205,25 @@ class PlantNode(Node):
             self.get_logger().error(f"kite crashed at t = {m.t:.2f} s (crash #{m.crashes}): relaunched")
         self.publish_sample()
         if self._end_step is not None and self.plant.k >= self._end_step:
-            self.get_logger().info(f"duration reached at t = {m.t:.2f} s; crashes: {m.crashes}")
-            raise SystemExit(0)
+            self._finished = True
+            self.get_logger().info(f"duration reached at t = {m.t:.2f} s; crashes: {m.crashes}; "
+                                   f"{self._throughput()}")
+            request_exit(self, 0)          # SystemExit under rclpy.spin; a flag under run_node's events loop
+
+    def _throughput(self) -> str:
+        if self._first_answer is None:
+            return "no steering command received"
+        wall, k0 = self._first_answer
+        wall = time.monotonic() - wall
+        steps = self.plant.k - k0
+        return (f"{self.p['mode']}: {steps} steps in {wall:.4f} s wall since the first steering command "
+                f"({steps * self.p['dt'] / max(wall, 1e-9):.1f}x real time)")
 
     def _command_received(self) -> None:
         self._commands += 1
         self._last_command = time.monotonic()
+        if self._first_answer is None:
+            self._first_answer = (self._last_command, self.plant.k)
         if self._neutral:
             self._neutral = False
             self.get_logger().info("steering commands are back")
@@ -166,34 +237,18 @@ class PlantNode(Node):
     def publish_sample(self) -> None:
         """Publish /clock and every measurement of the current sample, all stamped with its sim time."""
         m = self.plant.measure()
-        stamp = ns_to_stamp(self.plant.k * self._dt_ns)
-        self.pub_clock.publish(ClockMsg(clock=stamp))
-        s = JointState()
-        s.header.stamp = stamp
-        s.header.frame_id = "anchor"
-        s.name = ["theta", "phi", "psi"]
-        s.position = [m.theta, m.phi, m.psi]
-        s.velocity = [m.theta_dot, m.phi_dot, m.psi_dot]
-        p = PointStamped()
-        p.header = s.header
-        p.point.x, p.point.y, p.point.z = m.position
-        w = WrenchStamped()
-        w.header.stamp = stamp
-        w.header.frame_id = "tether"
-        w.wrench.force.x = m.tension
-        v = Vector3Stamped()
-        v.header.stamp = stamp
-        v.header.frame_id = "anchor"
-        v.vector.x = m.wind_ref
-        self.pub_tension.publish(w)
-        self.pub_position.publish(p)
-        self.pub_wind.publish(v)
-        self.pub_state.publish(s)          # last: in lockstep its arrival means the sample is complete
+        ns = self.plant.k * self._dt_ns
+        self.pub_clock.publish(self._msg_clock(ns, ()))
+        self.pub_tension.publish(self._msg_tension(ns, (m.tension,)))
+        self.pub_position.publish(self._msg_position(ns, m.position))
+        self.pub_wind.publish(self._msg_wind(ns, (m.wind_ref,)))
+        # last: in lockstep its arrival means the sample is complete
+        self.pub_state.publish(self._msg_state(ns, (m.theta, m.phi, m.psi, m.theta_dot, m.phi_dot, m.psi_dot)))
         self._last_publish = time.monotonic()
 
 
 def main(args=None) -> None:
-    raise SystemExit(run_node(PlantNode, args))
+    raise SystemExit(run_node(PlantNode, args, events=True))
 
 
 if __name__ == "__main__":
