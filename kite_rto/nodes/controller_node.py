@@ -230,7 +230,7 @@ class ControllerNode(Node):
 
 
 def main(args=None) -> None:
-    raise SystemExit(run_node(ControllerNode, args))
+    raise SystemExit(run_node(ControllerNode, args, events=True))
 
 
 if __name__ == "__main__":

@@ -24,7 +24,8 @@ from ..core.kite_rto import KiteRTOSettings, RTOSession, make_kite_gma
 from ..core.params import KiteParams, ParameterError
 from ..core.path import Setpoints, SetpointError, validate_setpoints
 from ..gma import HistoryStore
-from .common import LATCHED, RELIABLE_10, ParamSpec, declare_params, finite_floats, run_node, stamp_to_ns
+from .common import (LATCHED, RELIABLE_10, ParamSpec, declare_params, finite_floats, request_exit, run_node,
+                     stamp_to_ns)
 from .controller_node import PARAMS as CONTROLLER_PARAMS
 from .controller_node import _box
 from .sample_join import SampleJoin
@@ -181,7 +182,7 @@ class OptimizerNode(Node):
         self.publish_status()
         self.get_logger().info(f"done: {len(self.gma.records)} iterations; holding c = {self._deg(rec.c_next)}")
         if self.p["exit_when_done"]:
-            raise SystemExit(0)
+            request_exit(self, 0)
 
     # ----------------------------------------------------------------- output
     def publish_setpoints(self, c) -> None:
@@ -238,7 +239,7 @@ class OptimizerNode(Node):
 
 
 def main(args=None) -> None:
-    raise SystemExit(run_node(OptimizerNode, args))
+    raise SystemExit(run_node(OptimizerNode, args, events=True))
 
 
 if __name__ == "__main__":

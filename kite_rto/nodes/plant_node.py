@@ -17,13 +17,14 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
+from std_msgs.msg import UInt32
 
 from ..core.params import KiteParams
 from ..core.plant import PLANT_PARAMS, KitePlant, NoiseSettings, PlantConfig
 from ..core.wind import TurbulenceSettings
-from .common import (RELIABLE_10, MessageTemplate, ParamSpec, declare_params, finite_floats, joint_state_from_raw,
+from .common import (LATCHED, RELIABLE_10, MessageTemplate, ParamSpec, declare_params, finite_floats, joint_state_from_raw,
                      request_exit, run_node, stamp_to_ns)
-from .topics import CLOCK, POSITION, STATE, STEERING, TENSION, WIND
+from .topics import CLOCK, CRASHES, POSITION, STATE, STEERING, TENSION, WIND
 
 __all__ = ["PlantNode", "PARAMS", "main"]
 
@@ -50,11 +51,13 @@ PARAMS = (
     ParamSpec("turbulence", True, "turbulence on the reference wind"),
     ParamSpec("turbulence_intensity", 0.14, "gust std / mean wind", 0.0, 1.0),
     ParamSpec("turbulence_length", 100.0, "turbulence length scale L_W, m", 1.0, 10000.0),
+    ParamSpec("anemometer_noise", 0.1, "anemometer white noise std, m/s", 0.0, 10.0),
     ParamSpec("noise_angle_deg", 0.1, "angle measurement noise std, deg", 0.0, 10.0),
     ParamSpec("noise_rate", 0.005, "angular-rate measurement noise std, rad/s", 0.0, 1.0),
     ParamSpec("noise_tension", 0.01, "relative tension noise std", 0.0, 1.0),
     ParamSpec("launch_theta_deg", 30.0, "theta after launch and after a crash, deg", 1.0, 89.0),
     ParamSpec("command_timeout", 1.0, "wall seconds without steering before flying neutral", 0.01, 60.0),
+    ParamSpec("wait_subscribers", 1, "lockstep: subscribers of /kite/state to wait for before the first step", 0, 100),
     ParamSpec("resend_period", 0.2, "lockstep: wall seconds before an unanswered sample is re-published", 0.005, 10.0),
 )
 
@@ -63,7 +66,7 @@ def config_from_params(v: dict) -> PlantConfig:
     """Build the plant configuration from checked parameter values (raises ParameterError)."""
     params = KiteParams(**{k: v[k] for k in ("r", "area", "rho", "E", "c_E", "g_s", "w_ref", "z_ref", "shear")})
     turb = replace(TurbulenceSettings(), enabled=v["turbulence"], intensity=v["turbulence_intensity"],
-                   length_scale=v["turbulence_length"])
+                   length_scale=v["turbulence_length"], anemometer_noise=v["anemometer_noise"])
     noise = NoiseSettings(math.radians(v["noise_angle_deg"]), v["noise_rate"], v["noise_tension"])
     return PlantConfig(params=params, dt=v["dt"], substeps=v["substeps"], dead_time=v["dead_time"],
                        rate_limit=v["rate_limit"], turbulence=turb, noise=noise,
@@ -120,6 +123,8 @@ class PlantNode(Node):
         self.pub_position = self.create_publisher(PointStamped, POSITION, RELIABLE_10)
         self.pub_tension = self.create_publisher(WrenchStamped, TENSION, RELIABLE_10)
         self.pub_wind = self.create_publisher(Vector3Stamped, WIND, RELIABLE_10)
+        self.pub_crashes = self.create_publisher(UInt32, CRASHES, LATCHED)
+        self.pub_crashes.publish(UInt32(data=0))
         self.create_subscription(JointState, STEERING, self.steering_callback, RELIABLE_10, raw=True)
         # The sample's messages (see the builders above), serialized fast when the RMW allows it.
         self._msg_clock = MessageTemplate(_clock_msg, 0)
@@ -165,6 +170,9 @@ class PlantNode(Node):
         if self._lockstep:
             if stamp != now:
                 return                     # an answer to an earlier sample (duplicate or late): ignore
+            if not self._commands and self.pub_state.get_subscription_count() < self.p["wait_subscribers"]:
+                self._waiting_log()
+                return                     # hold sample 0 until every expected observer is connected
         elif stamp > now or now - stamp > max(5 * self._dt_ns, round(0.5e9)):
             self.get_logger().warning(f"rejected steering stamped {stamp * 1e-9:.3f} s at sim time "
                                       f"{now * 1e-9:.3f} s (stale or future)", throttle_duration_sec=2.0)
@@ -173,6 +181,10 @@ class PlantNode(Node):
         self._command_received()
         if self._lockstep:
             self.advance(self._delta)
+
+    def _waiting_log(self) -> None:
+        self.get_logger().info(f"waiting for {self.p['wait_subscribers']} subscribers of /kite/state "
+                               f"({self.pub_state.get_subscription_count()} connected)", throttle_duration_sec=5.0)
 
     def watchdog_callback(self) -> None:
         """Lockstep: re-publish an unanswered sample; fly neutral when commands stop.
@@ -203,6 +215,7 @@ class PlantNode(Node):
         if m.crashes != self._crashes:
             self._crashes = m.crashes
             self.get_logger().error(f"kite crashed at t = {m.t:.2f} s (crash #{m.crashes}): relaunched")
+            self.pub_crashes.publish(UInt32(data=m.crashes))
         self.publish_sample()
         if self._end_step is not None and self.plant.k >= self._end_step:
             self._finished = True

@@ -38,9 +38,9 @@ def fly(args, env, out: Path) -> dict:
 
     rclpy.init()
     rec = Recorder()
-    plant_params = {"duration": args.duration, "seed": args.seed}
+    plant_params = {"duration": args.duration, "seed": args.seed, "wait_subscribers": 2}  # controller, recorder
     if args.no_turbulence:
-        plant_params.update(turbulence=False, noise_angle_deg=0.0, noise_rate=0.0, noise_tension=0.0)
+        plant_params.update(turbulence=False, anemometer_noise=0.0, noise_angle_deg=0.0, noise_rate=0.0, noise_tension=0.0)
     log = open(out / "nodes.log", "w")
     ctrl = NodeProcess("controller", {}, log=log, env=env)
     wall0 = time.monotonic()

@@ -30,9 +30,9 @@ def optimize(args, env, out: Path) -> int:
     db = out / "rto.sqlite"
     if db.exists() and not args.resume:
         db.unlink()
-    plant_params = {"seed": args.seed}
+    plant_params = {"seed": args.seed, "wait_subscribers": 3}    # controller, optimizer, recorder
     if args.no_turbulence:
-        plant_params.update(turbulence=False, noise_angle_deg=0.0, noise_rate=0.0, noise_tension=0.0)
+        plant_params.update(turbulence=False, anemometer_noise=0.0, noise_angle_deg=0.0, noise_rate=0.0, noise_tension=0.0)
     print(f"kite_rto demo: GMA on the simulated kite, {args.iterations} iterations, lockstep, seed {args.seed}, "
           f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']} (node output in {out / 'nodes.log'})", flush=True)
     rclpy.init()
