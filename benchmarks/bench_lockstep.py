@@ -22,11 +22,12 @@ import argparse
 import os
 import random
 import re
-import signal
 import statistics
 import subprocess
 import sys
 import time
+
+from kite_rto.tools.graph import start_node, stop_node
 
 TARGET_RTF = 50.0
 DT = 0.02
@@ -42,39 +43,20 @@ def _env(domain: int) -> dict:
     return env
 
 
-def _start(module: str, params: dict, env: dict) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", module, "--ros-args"]
-    for k, v in params.items():
-        cmd += ["-p", f"{k}:={str(v).lower() if isinstance(v, bool) else v}"]
-    return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            start_new_session=True)
-
-
-def _stop(proc: subprocess.Popen, timeout: float = 10.0) -> str:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-    try:
-        out, _ = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        out, _ = proc.communicate()
-    return out or ""
-
-
 def run_once(duration: float, domain: int, timeout: float, extra_env: dict | None = None) -> dict:
     """One lockstep run; returns steps, in-plant wall time, end-to-end wall time, exit code and outputs."""
     env = _env(domain)
     env.update(extra_env or {})
-    pilot = _start("kite_rto.nodes.echo_pilot", {"delta": 0.0}, env)
+    pilot = start_node("echo_pilot", {"delta": 0.0}, env)
     t0 = time.perf_counter()
-    plant = _start("kite_rto.nodes.plant_node", {"duration": duration, "dt": DT, "command_timeout": 5.0}, env)
+    plant = start_node("plant", {"duration": duration, "dt": DT, "command_timeout": 5.0}, env)
     try:
         code = plant.wait(timeout=timeout)
     except subprocess.TimeoutExpired:
         code = None
     total = time.perf_counter() - t0
-    out_plant = _stop(plant)
-    out_pilot = _stop(pilot)
+    out_plant = stop_node(plant)
+    out_pilot = stop_node(pilot)
     m = _LINE.search(out_plant)
     return {"code": code, "total": total, "steps": int(m.group(1)) if m else None,
             "wall": float(m.group(2)) if m else None, "plant_out": out_plant, "pilot_out": out_pilot}

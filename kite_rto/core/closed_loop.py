@@ -5,7 +5,6 @@ runner only replaces the messages by direct calls (``delta = controller.command(
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np

@@ -22,7 +22,7 @@ from ..core.laps import LapDetector
 from ..core.params import KiteParams, ParameterError
 from ..core.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, Setpoints, SetpointError
 from ..core.plant import shared_model
-from .common import (LATCHED, RELIABLE_10, ParamSpec, declare_params, finite_floats, ns_to_stamp, run_node,
+from .common import (LATCHED, RELIABLE_10, ParamSpec, declare_params, finite_floats, run_node,
                      stamp_to_ns)
 from .topics import LAPS, POSITION, REFERENCE_PATH, SETPOINTS, STATE, STEERING, TENSION, WIND
 

@@ -8,7 +8,6 @@ experiment and iteration to an SQLite database, from which a restarted optimizer
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import replace
 
 import numpy as np
@@ -19,7 +18,6 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
-from ..core.experiment import ExperimentSpec
 from ..core.kite_rto import KiteRTOSettings, RTOSession, make_kite_gma
 from ..core.params import KiteParams, ParameterError
 from ..core.path import Setpoints, SetpointError, validate_setpoints

@@ -8,10 +8,36 @@ import subprocess
 import sys
 import threading
 
-__all__ = ["NodeProcess", "isolated_ros_env"]
+__all__ = ["NodeProcess", "isolated_ros_env", "node_command", "start_node", "stop_node"]
 
 MODULES = {"plant": "kite_rto.nodes.plant_node", "controller": "kite_rto.nodes.controller_node",
            "optimizer": "kite_rto.nodes.optimizer_node", "echo_pilot": "kite_rto.nodes.echo_pilot"}
+
+
+def node_command(name: str, params: dict | None = None) -> list[str]:
+    """The command line of ``ros2 run kite_rto <name> --ros-args -p k:=v ...`` for this interpreter."""
+    cmd = [sys.executable, "-m", MODULES[name], "--ros-args"]
+    for k, v in (params or {}).items():
+        cmd += ["-p", f"{k}:={str(v).lower() if isinstance(v, bool) else v}"]
+    return cmd
+
+
+def start_node(name: str, params: dict | None = None, env=None) -> subprocess.Popen:
+    """Start a node in its own process group, output (stdout + stderr) on a text pipe."""
+    return subprocess.Popen(node_command(name, params), env=env or dict(os.environ), stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
+
+
+def stop_node(proc: subprocess.Popen, timeout: float = 10.0) -> str:
+    """Ctrl-C the node (SIGINT), wait, kill its process group if it hangs; return its remaining output."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        out, _ = proc.communicate()
+    return out or ""
 
 
 def isolated_ros_env(domain_id: int | None = None) -> dict:
@@ -31,13 +57,9 @@ class NodeProcess:
     """
 
     def __init__(self, name: str, params: dict | None = None, log=None, env=None):
-        cmd = [sys.executable, "-m", MODULES[name], "--ros-args"]
-        for k, v in (params or {}).items():
-            cmd += ["-p", f"{k}:={str(v).lower() if isinstance(v, bool) else v}"]
         self.name = name
         self.lines: list[str] = []
-        self.proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                     start_new_session=True)
+        self.proc = start_node(name, params, env)
         self._log = log
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()

@@ -96,7 +96,7 @@ def _figures(history, rows, oracle, out: Path, samples, laps) -> None:
         w, n = nw_coordinates(th, ph, 400.0, theta_bar)
         ax.plot(w, n, "--", color=col, lw=0.8)
         if samples is not None and k in nominal:
-            t0, t1 = nominal[k][1].extra.get("t_start"), nominal[k][1].extra.get("t_end")
+            t1 = nominal[k][1].extra.get("t_end")
             t, theta, phi = samples
             sel = (t >= t1 - 20.0) & (t <= t1)
             if sel.any():
