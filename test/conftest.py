@@ -15,6 +15,7 @@ os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
 def pytest_configure(config):
     config.addinivalue_line("markers", "slow: long end-to-end or fault tests (run with -m slow)")
     config.addinivalue_line("markers", "ros: starts ROS 2 nodes over DDS")
+    config.addinivalue_line("markers", "faults: fault-injection suite (scripts/faults.sh), issue 7")
 
 
 @pytest.fixture

@@ -37,7 +37,8 @@ def test_colcon_installs_package_files(workspace):
     share = workspace / "install" / "kite_rto" / "share"
     assert (share / "ament_index" / "resource_index" / "packages" / "kite_rto").exists()
     assert (share / "kite_rto" / "package.xml").exists()
-    assert list((share / "kite_rto" / "config").glob("*.yaml"))
+    installed = share / "kite_rto" / "config" / "kite_rto.yaml"
+    assert installed.read_text() == (ROOT / "config" / "kite_rto.yaml").read_text()
     for exe in ("plant", "echo_pilot"):
         assert (workspace / "install" / "kite_rto" / "lib" / "kite_rto" / exe).exists()
 
@@ -55,3 +56,6 @@ def test_installed_plant_reads_params_file(workspace, ros_env):
     res = run_installed(workspace, "plant", f"--ros-args --params-file {cfg} -p mode:=realtime -p rate_factor:=10.0 -p duration:=0.2 "
                         , ros_env)
     assert res.returncode == 0, res.stdout + res.stderr
+    # a value from the command line after the installed file still goes through the same check
+    res = run_installed(workspace, "controller", f"--ros-args --params-file {cfg} -p k_psi:=500.0", ros_env)
+    assert res.returncode == 2 and "parameter k_psi = 500.0: expected a number in [0.01, 100] 1/s" in res.stderr

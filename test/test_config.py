@@ -9,3 +9,21 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_config_file_is_generated_from_the_declared_parameters():
     assert (ROOT / "config" / "kite_rto.yaml").read_text() == render(), \
         "regenerate: python -m kite_rto.tools.config_yaml > config/kite_rto.yaml"
+
+
+def test_readme_parameter_table_is_generated_from_the_declared_parameters():
+    from kite_rto.tools.config_yaml import README_BEGIN, README_END, render_markdown
+    text = (ROOT / "README.md").read_text()
+    assert text.count(README_BEGIN) == 1 and text.count(README_END) == 1
+    block = text[text.index(README_BEGIN) + len(README_BEGIN):text.index(README_END)]
+    assert block == "\n" + render_markdown(), \
+        "regenerate: python -m kite_rto.tools.config_yaml --readme README.md"
+
+
+def test_parameter_table_lists_every_parameter_of_every_node():
+    from kite_rto.tools.config_yaml import node_params, render_markdown
+    rows = [line.split(" | ") for line in render_markdown().splitlines()[2:]]
+    expected = [(node, f"`{s.name}`", "yes" if s.runtime else "no") for node, specs in node_params() for s in specs]
+    assert [(r[0].lstrip("| "), r[1], r[4]) for r in rows] == expected
+    assert {"k_psi", "rate_factor", "n_iter", "delta"} <= {s.name for _, specs in node_params() for s in specs
+                                                           if s.runtime}

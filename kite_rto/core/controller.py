@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from .model import KiteModel
 from .params import KiteParams, check_range
@@ -169,6 +169,25 @@ class PathController:
         self._blend = 0.0 if self.settings.blend_time > 0 else 1.0
         self.path = FigureEightPath(self._current_setpoints())
         return c
+
+    RETUNABLE = ("look_ahead", "k_psi", "k_i", "blend_time")
+    """Settings :meth:`retune` may change while flying (the others size the delay line or the setpoint check)."""
+
+    def retune(self, **changes) -> ControllerSettings:
+        """Change tuning settings of :data:`RETUNABLE` in flight; the next :meth:`command` uses them.
+
+        Raises ``ValueError`` (:class:`ParameterError` for a bad value) and changes nothing if refused. A blend in
+        progress continues with the new ``blend_time`` from where it is; 0 ends it at once.
+        """
+        other = sorted(set(changes) - set(self.RETUNABLE))
+        if other:
+            raise ValueError(f"PathController.retune: {', '.join(other)} cannot change in flight; "
+                             f"retunable: {', '.join(self.RETUNABLE)}")
+        self.settings = replace(self.settings, **changes)
+        if self.settings.blend_time <= 0.0 and self._blend < 1.0:
+            self._blend = 1.0
+            self.path = FigureEightPath(self._c)
+        return self.settings
 
     def _current_setpoints(self) -> Setpoints:
         if self._blend >= 1.0:

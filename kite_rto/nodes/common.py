@@ -9,6 +9,7 @@ wire format, types and QoS are unchanged: subscribers see ordinary messages.
 """
 from __future__ import annotations
 
+import array
 import math
 import os
 import struct
@@ -17,7 +18,7 @@ from dataclasses import dataclass
 
 import rclpy
 from builtin_interfaces.msg import Time
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -26,7 +27,7 @@ from sensor_msgs.msg import JointState
 
 from ..core.params import ParameterError
 
-__all__ = ["RELIABLE_10", "LATCHED", "ParamSpec", "declare_params", "stamp_to_ns", "ns_to_stamp",
+__all__ = ["RELIABLE_10", "LATCHED", "ParamSpec", "READ_ONLY", "declare_params", "stamp_to_ns", "ns_to_stamp",
            "finite_floats", "run_node", "request_exit", "MessageTemplate", "cdr_serialize", "joint_state_from_raw"]
 
 RELIABLE_10 = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
@@ -39,7 +40,13 @@ LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=Relia
 
 @dataclass(frozen=True)
 class ParamSpec:
-    """A declared parameter: name, default, description with units, and an optional numeric range."""
+    """A declared parameter: name, default, description, unit, allowed values, and whether it may change live.
+
+    ``low``/``high`` bound a number, or every element of a list-valued parameter; ``choices`` lists the allowed
+    strings; ``unit`` is shown with the description ("" for flags, names and counts without a unit);
+    ``runtime`` marks a parameter the running node applies when it is set (``ros2 param set``); every other one
+    is read-only while the node runs.
+    """
 
     name: str
     default: object
@@ -47,11 +54,34 @@ class ParamSpec:
     low: float | None = None
     high: float | None = None
     choices: tuple = ()
+    unit: str = ""
+    runtime: bool = False
+
+    @property
+    def doc(self) -> str:
+        """The description with its unit: the descriptor's text, the YAML comment, the README table."""
+        return f"{self.description} [{self.unit}]" if self.unit else self.description
+
+    def expected(self) -> str:
+        """What a valid value is, in words (used in every rejection message and in the README table)."""
+        unit = f" {self.unit}" if self.unit else ""
+        d = self.default
+        if isinstance(d, bool):
+            return "true or false"
+        if self.choices:
+            return "one of " + ", ".join(map(repr, self.choices))
+        if isinstance(d, str):
+            return "a non-empty string"
+        rng = ("" if self.low is None and self.high is None
+               else f"[{_bound(self.low, '-inf')}, {_bound(self.high, 'inf')}]")
+        if isinstance(d, (list, tuple)):
+            return f"a list of {len(d)} numbers" + (f", each in {rng}" if rng else "") + unit
+        kind = "an integer" if isinstance(d, int) else "a number"
+        return f"{kind} in {rng}{unit}" if rng else kind + unit
 
     def descriptor(self) -> ParameterDescriptor:
-        d = ParameterDescriptor(description=self.description)
-        if self.choices:
-            d.additional_constraints = "one of: " + ", ".join(map(str, self.choices))
+        d = ParameterDescriptor(description=self.doc, read_only=not self.runtime)
+        d.additional_constraints = self.expected() + ("" if self.runtime else f"; {READ_ONLY}")
         if self.low is not None and self.high is not None:
             if isinstance(self.default, float):
                 d.floating_point_range = [FloatingPointRange(from_value=float(self.low), to_value=float(self.high))]
@@ -61,29 +91,63 @@ class ParamSpec:
 
     def check(self, value) -> None:
         """Raise :class:`ParameterError` naming the parameter, the value and what was expected."""
-        if isinstance(self.default, bool):
-            if not isinstance(value, bool):
-                raise ParameterError(f"parameter {self.name} = {value!r}: expected true or false")
-            return
-        if isinstance(self.default, (int, float)):
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise ParameterError(f"parameter {self.name} = {value!r}: expected a number")
-            if isinstance(self.default, int) and not isinstance(value, int):
-                raise ParameterError(f"parameter {self.name} = {value!r}: expected an integer")
-            if not math.isfinite(value):
-                raise ParameterError(f"parameter {self.name} = {value!r}: expected a finite number")
-            if (self.low is not None and value < self.low) or (self.high is not None and value > self.high):
-                raise ParameterError(f"parameter {self.name} = {value!r}: expected a value in "
-                                     f"[{self.low}, {self.high}]")
-        if self.choices and value not in self.choices:
-            raise ParameterError(f"parameter {self.name} = {value!r}: expected one of {', '.join(map(repr, self.choices))}")
+        if not self._valid(value):
+            if isinstance(value, array.array):
+                value = value.tolist()
+            shown = "<empty or not set>" if value is None else repr(value)   # `-p name:=[]` arrives as NOT_SET
+            raise ParameterError(f"parameter {self.name} = {shown}: expected {self.expected()}")
+
+    def _valid(self, value) -> bool:
+        d = self.default
+        if isinstance(d, bool):
+            return isinstance(value, bool)
+        if isinstance(d, str):
+            if not isinstance(value, str):
+                return False
+            return value in self.choices if self.choices else value != ""
+        if isinstance(d, (list, tuple)):
+            return (isinstance(value, (list, tuple, array.array)) and len(value) == len(d)
+                    and all(self._number_ok(v, float) for v in value))
+        return self._number_ok(value, int if isinstance(d, int) else float)
+
+    def _number_ok(self, value, kind) -> bool:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            return False
+        if kind is int and not isinstance(value, int):
+            return False
+        return (math.isfinite(value) and (self.low is None or value >= self.low)
+                and (self.high is None or value <= self.high))
 
 
-def declare_params(node, specs) -> dict:
-    """Declare every spec on ``node`` (dynamic typing so a wrong type reaches our check) and return checked values.
+def _bound(x, unbounded: str) -> str:
+    """A range bound as written in messages: integers as they are, floats in their shortest form (1e+07)."""
+    if x is None:
+        return unbounded
+    if isinstance(x, int):
+        return str(x)
+    return f"{x:g}" if float(f"{x:g}") == x else repr(x)
 
-    Raises :class:`ParameterError` for the first bad value.
+
+READ_ONLY = "read-only while running: restart the node to change it"
+"""The reason given when a parameter that is not ``runtime`` is set on a running node."""
+
+
+def declare_params(node, specs, apply=None, cross_check=None) -> dict:
+    """Declare every spec on ``node``, check the values, and validate (and apply) later changes.
+
+    Start-up: each parameter is declared with its descriptor (dynamic typing, so a wrong type reaches our
+    check; ``read_only`` unless ``spec.runtime``), checked by :meth:`ParamSpec.check`, then ``cross_check(values)``
+    runs on all of them. Raises :class:`ParameterError` for the first bad value (``run_node``: exit code 2).
+
+    Running: a set-parameters request is checked the same way (then ``cross_check`` on the values it would leave)
+    and, if every parameter is ``runtime`` and valid, ``apply(changes)`` is called (it must raise
+    :class:`ParameterError` before changing anything when it refuses) and the returned dict is updated in
+    place; otherwise the request is rejected with a reason that names parameter, value and what was expected,
+    or says the parameter is read-only while running.
     """
+    specs = tuple(specs)
+    if any(s.runtime for s in specs) and apply is None:
+        raise TypeError("declare_params: runtime parameters need an apply callback")
     values = {}
     for s in specs:
         d = s.descriptor()
@@ -94,11 +158,84 @@ def declare_params(node, specs) -> dict:
             override = node._parameter_overrides.get(s.name)  # rclpy's own range check refused it
             s.check(override.value if override is not None else None)
             raise
-        if isinstance(s.default, float) and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
         s.check(value)
-        values[s.name] = value
+        values[s.name] = _normalized(s, value)
+    if cross_check is not None:
+        cross_check(dict(values))
+    _watch_params(node, {s.name: s for s in specs}, values, apply, cross_check)
     return values
+
+
+def _normalized(spec: ParamSpec, value):
+    """A checked value in the type of the default (an integer given for a float parameter becomes a float)."""
+    if isinstance(spec.default, float) and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if isinstance(spec.default, (list, tuple)):
+        return [float(v) for v in value]
+    return value
+
+
+def _watch_params(node, specs: dict, values: dict, apply, cross_check) -> None:
+    """Register the runtime validation of :func:`declare_params` on ``node``."""
+
+    def reason(parameter_list) -> str | None:
+        """Why this set-parameters request is refused, or None (parameters not in ``specs`` pass through)."""
+        merged = dict(values)
+        for p in parameter_list:
+            s = specs.get(p.name)
+            if s is None:
+                continue
+            value = p.value.tolist() if isinstance(p.value, array.array) else p.value
+            if not s.runtime:
+                return f"parameter {p.name} = {value!r}: {READ_ONLY}"
+            try:
+                s.check(value)
+            except ParameterError as err:
+                return str(err)
+            merged[p.name] = _normalized(s, value)
+        if cross_check is not None:
+            try:
+                cross_check(merged)
+            except (ParameterError, ValueError) as err:
+                return str(err)
+        return None
+
+    def on_set(parameter_list) -> SetParametersResult:
+        why = reason(parameter_list)
+        if why is not None:
+            return SetParametersResult(successful=False, reason=why)
+        changes = {p.name: _normalized(specs[p.name], p.value) for p in parameter_list if p.name in specs}
+        if changes:
+            try:
+                apply(dict(changes))
+            except (ParameterError, ValueError) as err:
+                return SetParametersResult(successful=False, reason=str(err))
+            values.update(changes)
+            node.get_logger().info("parameters changed: " + ", ".join(f"{k} = {v!r}" for k, v in changes.items()))
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(on_set)
+
+    # rclpy refuses a read-only parameter, and a value outside a descriptor's range, before any on-set callback
+    # runs, with its own wording. The public setters are wrapped so that every refusal of a declared parameter
+    # reads like the start-up check (parameter, value, expected) and read-only ones say how to change them.
+    set_one_by_one, set_atomically = node.set_parameters, node.set_parameters_atomically
+
+    def set_parameters(parameter_list):
+        out = []
+        for p in parameter_list:
+            why = reason([p])
+            out.append(SetParametersResult(successful=False, reason=why) if why is not None
+                       else set_one_by_one([p])[0])
+        return out
+
+    def set_parameters_atomically(parameter_list):
+        why = reason(parameter_list)
+        return SetParametersResult(successful=False, reason=why) if why is not None \
+            else set_atomically(parameter_list)
+
+    node.set_parameters = set_parameters
+    node.set_parameters_atomically = set_parameters_atomically
 
 
 def stamp_to_ns(stamp) -> int:

@@ -8,6 +8,7 @@ All computation is :class:`kite_rto.core.controller.PathController` and :class:`
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import replace
 from types import SimpleNamespace
 
@@ -22,8 +23,9 @@ from ..core.laps import LapDetector
 from ..core.params import KiteParams, ParameterError
 from ..core.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, Setpoints, SetpointError
 from ..core.plant import shared_model
-from .common import (LATCHED, RELIABLE_10, ParamSpec, declare_params, finite_floats, run_node,
+from .common import (LATCHED, RELIABLE_10, ParamSpec, declare_params, run_node,
                      stamp_to_ns)
+from .sample_join import MAX_STAMP_GAP_NS, POSITION_MAX, TENSION_MAX, WIND_MAX, RejectLog, state_values
 from .topics import LAPS, POSITION, REFERENCE_PATH, SETPOINTS, STATE, STEERING, TENSION, WIND
 
 __all__ = ["ControllerNode", "PARAMS", "LAP_FIELDS", "main"]
@@ -32,42 +34,55 @@ _C = ControllerSettings()
 _B = SetpointBox()
 _D = DEFAULT_SETPOINTS.degrees()
 PARAMS = (
-    ParamSpec("theta_0_deg", _D[0], "initial setpoint theta_0 (until /rto/setpoints says otherwise), deg", 1.0, 89.0),
-    ParamSpec("A_phi_deg", _D[1], "initial setpoint A_phi, deg", 0.1, 89.0),
-    ParamSpec("A_theta_deg", _D[2], "initial setpoint A_theta, deg", -30.0, 30.0),
-    ParamSpec("box_theta_0_deg", [math.degrees(v) for v in _B.theta_0], "accepted theta_0 range [low, high], deg"),
-    ParamSpec("box_A_phi_deg", [math.degrees(v) for v in _B.A_phi], "accepted A_phi range [low, high], deg"),
-    ParamSpec("box_A_theta_deg", [math.degrees(v) for v in _B.A_theta], "accepted A_theta range [low, high], deg"),
-    ParamSpec("dt", _C.dt, "sample time, s (must equal the plant's)", 0.001, 0.1),
-    ParamSpec("dead_time", _C.dead_time, "steering dead time to compensate, s", 0.0, 5.0),
-    ParamSpec("rate_limit", _C.rate_limit, "steering rate limit, 1/s", 0.01, 1000.0),
-    ParamSpec("delta_max", _C.delta_max, "steering limit, normalized", 0.05, 1.0),
-    ParamSpec("look_ahead", _C.look_ahead, "guidance look-ahead, rad of arc", 0.001, 1.0),
-    ParamSpec("k_psi", _C.k_psi, "orientation-error gain, 1/s", 0.01, 100.0),
-    ParamSpec("k_i", _C.k_i, "integral gain", 0.0, 100.0),
-    ParamSpec("blend_time", _C.blend_time, "setpoint blend duration, s", 0.0, 600.0),
-    ParamSpec("E", KiteParams.E, "model glide ratio (nominal)", 0.5, 30.0),
-    ParamSpec("g_s", KiteParams.g_s, "model turning constant, rad/m", 0.001, 1.0),
-    ParamSpec("shear", KiteParams.shear, "model wind shear exponent", 0.0, 1.0),
-    ParamSpec("r", KiteParams.r, "tether length, m", 1.0, 5000.0),
-    ParamSpec("z_ref", KiteParams.z_ref, "anemometer height, m", 0.5, 200.0),
+    ParamSpec("theta_0_deg", _D[0], "initial setpoint theta_0 (until /rto/setpoints says otherwise); inside the box",
+              1.0, 89.0, unit="deg"),
+    ParamSpec("A_phi_deg", _D[1], "initial setpoint A_phi; inside the box", 0.1, 89.0, unit="deg"),
+    ParamSpec("A_theta_deg", _D[2], "initial setpoint A_theta; inside the box", -30.0, 30.0, unit="deg"),
+    ParamSpec("box_theta_0_deg", [round(math.degrees(v), 9) for v in _B.theta_0],
+              "accepted theta_0 range [low, high], low <= high", 1.0, 89.0, unit="deg"),
+    ParamSpec("box_A_phi_deg", [round(math.degrees(v), 9) for v in _B.A_phi],
+              "accepted A_phi range [low, high], low <= high", 0.1, 89.0, unit="deg"),
+    ParamSpec("box_A_theta_deg", [round(math.degrees(v), 9) for v in _B.A_theta],
+              "accepted A_theta range [low, high], low <= high", -30.0, 30.0, unit="deg"),
+    ParamSpec("dt", _C.dt, "sample time (must equal the plant's)", 0.001, 0.1, unit="s"),
+    ParamSpec("dead_time", _C.dead_time, "steering dead time to compensate", 0.0, 5.0, unit="s"),
+    ParamSpec("rate_limit", _C.rate_limit, "steering rate limit (normalized delta per second)", 0.01, 1000.0,
+              unit="1/s"),
+    ParamSpec("delta_max", _C.delta_max, "steering limit (normalized delta)", 0.05, 1.0, unit="dimensionless"),
+    ParamSpec("look_ahead", _C.look_ahead, "guidance look-ahead", 0.001, 1.0, unit="rad of arc", runtime=True),
+    ParamSpec("k_psi", _C.k_psi, "orientation-error gain", 0.01, 100.0, unit="1/s", runtime=True),
+    ParamSpec("k_i", _C.k_i, "integral gain: turn rate per integrated cross-track error (rad/s per rad s)",
+              0.0, 100.0, unit="1/s^2", runtime=True),
+    ParamSpec("blend_time", _C.blend_time, "duration of the blend to new setpoints (0: switch at once)", 0.0, 600.0,
+              unit="s", runtime=True),
+    ParamSpec("E", KiteParams.E, "model glide ratio (nominal)", 0.5, 30.0, unit="dimensionless"),
+    ParamSpec("g_s", KiteParams.g_s, "model turning constant", 0.001, 1.0, unit="rad/m"),
+    ParamSpec("shear", KiteParams.shear, "model wind shear exponent", 0.0, 1.0, unit="dimensionless"),
+    ParamSpec("r", KiteParams.r, "tether length (must equal the plant's)", 1.0, 5000.0, unit="m"),
+    ParamSpec("z_ref", KiteParams.z_ref, "anemometer height (reference height of the model's wind profile)", 0.5,
+              200.0, unit="m"),
 )
+SETPOINTS_GRACE, SETPOINTS_WAIT = 1.0, 3.0
+"""Wall s after start-up during which the controller waits for /rto/setpoints before steering (see
+:meth:`ControllerNode._await_setpoints`): always for the first, while an optimizer is known for the second."""
 LAP_FIELDS = ("lap", "lap_time", "mean_tension", "min_altitude", "rms_cross_track_deg", "tension_coefficient",
               "theta_0", "A_phi", "A_theta")
 """Names of the /kite/laps JointState: lap index, s, N, m, deg, N/(m/s)^2, then the lap's projection (rad)."""
 
 
 def _box(v: dict) -> SetpointBox:
+    """The setpoint box of checked ``box_*_deg`` parameter values (raises ParameterError for an inverted pair)."""
     bounds = {}
     for name in Setpoints.names():
         pair = v[f"box_{name}_deg"]
-        if len(pair) != 2:
-            raise ParameterError(f"parameter box_{name}_deg = {list(pair)!r}: expected [low, high] in deg")
+        if len(pair) != 2 or not pair[0] <= pair[1]:
+            raise ParameterError(f"parameter box_{name}_deg = {list(pair)!r}: expected [low, high] in deg "
+                                 "with low <= high")
         bounds[name] = (math.radians(pair[0]), math.radians(pair[1]))
     try:
         return SetpointBox(**bounds)
     except SetpointError as err:
-        raise ParameterError(f"setpoint box: {err}") from None
+        raise ParameterError(f"setpoint box (box_theta_0_deg, box_A_phi_deg, box_A_theta_deg): {err}") from None
 
 
 class ControllerNode(Node):
@@ -75,7 +90,7 @@ class ControllerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("controller", **kwargs)
-        v = declare_params(self, PARAMS)
+        v = declare_params(self, PARAMS, apply=self.apply_params)
         self.params = KiteParams(E=v["E"], g_s=v["g_s"], shear=v["shear"], r=v["r"], z_ref=v["z_ref"])
         self.settings = replace(ControllerSettings(), dt=v["dt"], dead_time=v["dead_time"], rate_limit=v["rate_limit"],
                                 delta_max=v["delta_max"], look_ahead=v["look_ahead"], k_psi=v["k_psi"],
@@ -97,72 +112,215 @@ class ControllerNode(Node):
         self._wind, self._tension, self._altitude = self.params.w_ref, math.nan, math.nan
         self._last_stamp = None
         self._last_delta = 0.0
-        self._wind_stamp = None
-        self._pending = None
+        self._winds = {}                  # anemometer readings by stamp (ns), until their sample is answered
+        self._pending = None              # (stamp, stamp msg, position, velocity) waiting for its wind reading
+        self._jump = None                 # the same for a stale or future sample (plant restart or junk)
+        self._candidate = None            # (stamp, fresh controller or None, its answer): complete, off the timeline
+        self._setpoints_in = False        # accepted /rto/setpoints yet (see _await_setpoints)
+        self._t_up = time.monotonic()
+        self._reject_log = RejectLog(self.get_logger())
         self.publish_path()
         self.get_logger().info(f"controller up: setpoints {self._fmt(c0)}")
 
+    def apply_params(self, changes: dict) -> None:
+        """Runtime parameters (``look_ahead``, ``k_psi``, ``k_i``, ``blend_time``): retune the flying controller.
+
+        Every later PathController (plant restart, first setpoints) is built with the new settings too.
+        """
+        try:
+            settings = replace(self.settings, **changes)          # validated (ControllerSettings.__post_init__)
+        except ValueError as err:
+            raise ParameterError(str(err)) from None
+        self.controller.retune(**changes)
+        self.settings = settings
+
     # -------------------------------------------------------------- measurements
+    # Every reading carries the stamp of its plant sample. A /kite/state sample is answered once the anemometer
+    # reading with the same stamp is in: DDS does not order across topics, and waiting for it makes the loop as
+    # deterministic as the pure runner; if that reading is lost, the next sample releases the waiting one with the
+    # previous reading. A state stamped before the last answered sample (plant restart: sim time jumped back) or
+    # more than MAX_STAMP_GAP_NS after it (samples lost) moves the timeline only as a complete sample (with the
+    # anemometer reading of the same stamp) that the next complete sample continues (_new_timeline); otherwise it is
+    # rejected as stale or future. Readings with bad values, or (tension, position) stamped far from the last
+    # sample, are rejected with throttled warnings.
     def wind_callback(self, msg: Vector3Stamped) -> None:
         v = msg.vector.x
-        if not (math.isfinite(v) and 0.0 <= v < 100.0):
-            self._reject("wind", v, "a finite speed in [0, 100) m/s")
+        if not (math.isfinite(v) and 0.0 <= v < WIND_MAX):
+            self._reject("wind", f"rejected wind message {v!r}: expected a finite speed in [0, {WIND_MAX:g}) m/s")
             return
-        self._wind, self._wind_stamp = v, stamp_to_ns(msg.header.stamp)
-        if self._pending is not None and stamp_to_ns(self._pending.header.stamp) == self._wind_stamp:
-            self._process(self._pending)
+        stamp = stamp_to_ns(msg.header.stamp)
+        winds = self._winds
+        if len(winds) >= 64:
+            del winds[next(iter(winds))]
+        winds[stamp] = v
+        for held in (self._pending, self._jump):
+            if held is not None and held[0] == stamp:
+                self._process(held)
+                return
 
     def tension_callback(self, msg: WrenchStamped) -> None:
         v = msg.wrench.force.x
-        if math.isfinite(v) and v >= 0.0:
+        if not (math.isfinite(v) and 0.0 <= v <= TENSION_MAX):
+            self._reject("tension", f"rejected tension message {v!r}: expected a finite force in "
+                                    f"[0, {TENSION_MAX:g}] N")
+        elif self._stamp_near("tension", msg.header.stamp):
             self._tension = v
-        else:
-            self._reject("tension", v, "a finite, non-negative force in N")
 
     def position_callback(self, msg: PointStamped) -> None:
-        v = msg.point.z
-        if math.isfinite(v):
-            self._altitude = v
-        else:
-            self._reject("position", v, "a finite altitude in m")
+        p = msg.point
+        if not all(math.isfinite(x) and abs(x) <= POSITION_MAX for x in (p.x, p.y, p.z)):
+            self._reject("position", f"rejected position message {[p.x, p.y, p.z]!r}: expected finite coordinates "
+                                     f"within +-{POSITION_MAX:g} m")
+        elif self._stamp_near("position", msg.header.stamp):
+            self._altitude = p.z
+
+    def _stamp_near(self, what: str, stamp_msg) -> bool:
+        last = self._last_stamp
+        stamp = stamp_to_ns(stamp_msg)
+        if last is None or abs(stamp - last) <= MAX_STAMP_GAP_NS:
+            return True
+        self._reject(f"{what} stamp", f"rejected {what} message stamped {stamp * 1e-9:.3f} s at sim time "
+                                      f"{last * 1e-9:.3f} s: stale or future")
+        return False
 
     def state_callback(self, msg: JointState) -> None:
-        """Answer the sample once its anemometer reading (same stamp) is in: DDS does not order across topics,
-        and waiting for the matching reading makes the loop as deterministic as the pure runner. If the reading
-        is lost, the next sample releases the waiting one with the latest reading."""
-        if self._pending is not None:
-            self._process(self._pending)
-        if stamp_to_ns(msg.header.stamp) == self._wind_stamp:
-            self._process(msg)
-        else:
-            self._pending = msg
-
-    def _process(self, msg: JointState) -> None:
-        self._pending = None
-        pos, vel = finite_floats(msg.position, 3), finite_floats(msg.velocity, 3)
-        if pos is None or vel is None or list(msg.name) != ["theta", "phi", "psi"]:
-            self._reject("state", (list(msg.name), list(msg.position), list(msg.velocity)),
-                         "names [theta, phi, psi] with 3 finite positions (rad) and velocities (rad/s)")
+        try:
+            pos, vel = state_values(msg.name, msg.position, msg.velocity)
+        except ValueError as err:
+            self._reject("state", f"rejected state message: {err}")
+            return
+        if not self._setpoints_in and self._await_setpoints():
             return
         stamp = stamp_to_ns(msg.header.stamp)
-        if self._last_stamp is not None and stamp == self._last_stamp:
-            self._answer(msg.header.stamp, self._last_delta)      # re-published sample: same answer
+        held = (stamp, msg.header.stamp, pos, vel)
+        last = self._last_stamp
+        if self._jump is not None:
+            self._reject_jump()
+        if last is not None and not last <= stamp <= last + MAX_STAMP_GAP_NS:
+            if stamp in self._winds:
+                self._process(held)                 # complete: the plant restarted or samples were lost
+            else:
+                self._jump = held                   # wait for its anemometer reading
             return
-        if self._last_stamp is not None and stamp < self._last_stamp:
-            self.get_logger().warning(f"sim time jumped back ({self._last_stamp * 1e-9:.2f} s -> {stamp * 1e-9:.2f} s):"
-                                      " plant restarted, re-synchronizing")
-            self.controller = PathController(shared_model(), self.params, self.controller.setpoints, self.settings)
-            self.laps.reset()
+        if self._pending is not None and self._pending[0] < stamp:
+            self._process(self._pending)            # its anemometer reading was lost
+        if stamp == last or stamp in self._winds:
+            self._process(held)
+        else:
+            self._pending = held
+
+    def _await_setpoints(self) -> bool:
+        """True (do not steer yet) while the optimizer's setpoints may still be on their way.
+
+        A controller started into a running loop (e.g. restarted after a crash) would otherwise steer the kite
+        towards its initial setpoints until the latched /rto/setpoints arrive. It waits while a publisher of
+        /rto/setpoints is known, or for the first SETPOINTS_GRACE s after start-up (discovery), at most
+        SETPOINTS_WAIT s; without an optimizer it then flies its initial setpoints. A lockstep plant waits
+        meanwhile; a plant that had been steered flies neutral (command_timeout).
+        """
+        age = time.monotonic() - self._t_up
+        if age < SETPOINTS_WAIT and (age < SETPOINTS_GRACE or self.count_publishers(SETPOINTS) > 0):
+            self.get_logger().info("waiting for the setpoints on /rto/setpoints before steering",
+                                   throttle_duration_sec=2.0)
+            return True
+        if self.count_publishers(SETPOINTS) > 0:
+            self.get_logger().warning(f"no valid setpoints on /rto/setpoints within {SETPOINTS_WAIT:g} s: flying "
+                                      f"{self._fmt(self.controller.setpoints)}")
+        self._setpoints_in = True                       # stop waiting (and asking the graph)
+        return False
+
+    def _reject_jump(self) -> None:
+        stamp = self._jump[0]
+        self._jump = None
+        self._reject("state stamp", f"rejected state message stamped {stamp * 1e-9:.3f} s at sim time "
+                                    f"{self._last_stamp * 1e-9:.3f} s: stale or future, and no anemometer reading "
+                                    "with that stamp (not a plant restart)")
+
+    def _process(self, held) -> None:
+        if held is self._pending:
+            self._pending = None
+        elif held is self._jump:
+            self._jump = None
+        stamp, stamp_msg, pos, vel = held
+        last = self._last_stamp
+        if stamp == last:
+            self._answer(stamp_msg, self._last_delta)      # re-published sample: same answer
+            return
+        wind = self._winds.pop(stamp, None)
+        if last is not None and not last < stamp <= last + MAX_STAMP_GAP_NS:
+            if not self._new_timeline(stamp, stamp_msg, pos, vel, wind):
+                return
+        elif self._candidate is not None:
+            self._drop_candidate()
+        if wind is not None:
+            self._wind = wind
+        if self._winds:
+            self._drop_winds(stamp)
         t = stamp * 1e-9
         m = SimpleNamespace(t=t, theta=pos[0], phi=pos[1], psi=pos[2], theta_dot=vel[0], phi_dot=vel[1],
                             psi_dot=vel[2], wind_ref=self._wind)
         delta = self.controller.command(m)
         self._last_stamp, self._last_delta = stamp, delta
-        self._answer(msg.header.stamp, delta)
+        self._answer(stamp_msg, delta)
         lap = self.laps.update(t, pos[0], pos[1], self._tension, self._altitude,
                                self.controller.status.cross_track, self._wind)
         if lap is not None:
-            self.publish_lap(msg.header.stamp, lap)
+            self.publish_lap(stamp_msg, lap)
+
+    def _new_timeline(self, stamp: int, stamp_msg, pos, vel, wind) -> bool:
+        """A complete sample off the timeline (stamped before the last one, or far after it): True to fly on with it.
+
+        The first one is only a candidate; the next complete sample confirms it when it continues the candidate
+        (a later stamp within MAX_STAMP_GAP_NS), and the old timeline going on instead drops it as junk. A restart
+        candidate is answered by a fresh controller (a restarted lockstep plant waits for that answer), which is
+        kept if the restart is confirmed; the flying controller never sees the candidate.
+        """
+        last, cand = self._last_stamp, self._candidate
+        if cand is not None and cand[0] < stamp <= cand[0] + MAX_STAMP_GAP_NS:
+            self._candidate = self._pending = None
+            if stamp < last:
+                self.get_logger().warning(f"sim time jumped back ({last * 1e-9:.2f} s -> {cand[0] * 1e-9:.2f} s): "
+                                          "plant restarted, re-synchronizing")
+                self.controller = cand[1]
+                self.laps.reset()
+            else:
+                self.get_logger().warning(f"sim time jumped forward ({last * 1e-9:.2f} s -> {cand[0] * 1e-9:.2f} s): "
+                                          "samples were lost")
+            return True
+        if cand is not None and cand[0] == stamp:           # the candidate re-published: the same answer
+            if cand[1] is not None:
+                self._answer(stamp_msg, cand[2])
+            return False
+        if cand is not None:
+            self._drop_candidate()
+        if stamp < last:
+            fresh = PathController(shared_model(), self.params, self.controller.setpoints, self.settings)
+            m = SimpleNamespace(t=stamp * 1e-9, theta=pos[0], phi=pos[1], psi=pos[2], theta_dot=vel[0],
+                                phi_dot=vel[1], psi_dot=vel[2], wind_ref=self._wind if wind is None else wind)
+            delta = fresh.command(m)
+            self._candidate = (stamp, fresh, delta)
+            self._answer(stamp_msg, delta)
+        else:
+            self._candidate = (stamp, None, 0.0)
+        return False
+
+    def _drop_candidate(self) -> None:
+        stamp = self._candidate[0]
+        self._candidate = None
+        self._reject("state stamp", f"rejected state sample stamped {stamp * 1e-9:.3f} s at sim time "
+                                    f"{self._last_stamp * 1e-9:.3f} s: stale or future, and the timeline went on "
+                                    "(not a plant restart)")
+
+    def _drop_winds(self, stamp: int) -> None:
+        """Forget readings older than the answered sample; reject those far from it (stale or future junk)."""
+        winds = self._winds
+        for s in list(winds):
+            if s < stamp or s > stamp + MAX_STAMP_GAP_NS:
+                v = winds.pop(s)
+                if abs(s - stamp) > MAX_STAMP_GAP_NS:
+                    self._reject("wind stamp", f"rejected wind message {v!r} stamped {s * 1e-9:.3f} s at sim "
+                                               f"time {stamp * 1e-9:.3f} s: stale or future (no state sample has "
+                                               "that stamp)")
 
     def _answer(self, stamp, delta: float) -> None:
         cmd = JointState()
@@ -175,7 +333,8 @@ class ControllerNode(Node):
     def setpoints_callback(self, msg: JointState) -> None:
         names = list(msg.name)
         if sorted(names) != sorted(Setpoints.names()) or len(msg.position) != 3:
-            self._reject("setpoints", (names, list(msg.position)), "names theta_0, A_phi, A_theta with 3 values (rad)")
+            self._reject("setpoints", f"rejected setpoints message {(names, list(msg.position))!r}: expected names "
+                                      "theta_0, A_phi, A_theta with 3 values (rad)")
             return
         values = dict(zip(names, msg.position))
         c = [values[n] for n in Setpoints.names()]
@@ -186,10 +345,11 @@ class ControllerNode(Node):
             else:
                 accepted = self.controller.set_setpoints(c)
         except SetpointError as err:
-            self.get_logger().warning(f"rejected setpoints: {err}; keeping {self._fmt(self.controller.setpoints)}",
-                                      throttle_duration_sec=2.0)
+            self._reject("setpoints value", f"rejected setpoints: {err}; keeping "
+                                            f"{self._fmt(self.controller.setpoints)}")
             return
         self.laps.reset()
+        self._setpoints_in = True
         self.get_logger().info(f"new setpoints {self._fmt(accepted)}")
         self.publish_path()
 
@@ -221,8 +381,8 @@ class ControllerNode(Node):
         self.get_logger().info(f"lap {lap.index}: {lap.duration:.1f} s, mean tension {lap.mean_tension / 1e3:.0f} kN, "
                                f"min altitude {lap.min_altitude:.0f} m, RMS cross-track {lap.rms_cross_track_deg:.2f} deg")
 
-    def _reject(self, what: str, value, expected: str) -> None:
-        self.get_logger().warning(f"rejected {what} message {value!r}: expected {expected}", throttle_duration_sec=2.0)
+    def _reject(self, key: str, text: str) -> None:
+        self._reject_log(key, text)
 
     @staticmethod
     def _fmt(c: Setpoints) -> str:

@@ -18,7 +18,8 @@ from .topics import STATE, STEERING
 
 __all__ = ["EchoPilot", "main", "steering_msg"]
 
-PARAMS = (ParamSpec("delta", 0.0, "constant steering command, normalized", -1.0, 1.0),)
+PARAMS = (ParamSpec("delta", 0.0, "constant steering command (normalized delta)", -1.0, 1.0,
+                    unit="dimensionless", runtime=True),)
 
 
 def steering_msg(stamp, values) -> JointState:
@@ -33,12 +34,17 @@ class EchoPilot(Node):
 
     def __init__(self, **kwargs):
         super().__init__("echo_pilot", **kwargs)
-        self.delta = declare_params(self, PARAMS)["delta"]
+        self.delta = declare_params(self, PARAMS, apply=self.apply_params)["delta"]
         self._values = (self.delta,)
         self._answer = MessageTemplate(steering_msg, 1)
         self.pub = self.create_publisher(JointState, STEERING, RELIABLE_10)
         self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10, raw=True)
         self.answered = 0
+
+    def apply_params(self, changes: dict) -> None:
+        """Runtime parameter ``delta``: the next answers carry the new command."""
+        self.delta = changes["delta"]
+        self._values = (self.delta,)
 
     def state_callback(self, msg) -> None:
         """A state sample: raw bytes from the node's own subscription, or a JointState."""

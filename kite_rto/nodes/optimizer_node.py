@@ -8,6 +8,7 @@ experiment and iteration to an SQLite database, from which a restarted optimizer
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import replace
 
 import numpy as np
@@ -22,11 +23,11 @@ from ..core.kite_rto import KiteRTOSettings, RTOSession, make_kite_gma
 from ..core.params import KiteParams, ParameterError
 from ..core.path import Setpoints, SetpointError, validate_setpoints
 from ..gma import HistoryStore
-from .common import (LATCHED, RELIABLE_10, ParamSpec, declare_params, finite_floats, request_exit, run_node,
+from .common import (LATCHED, RELIABLE_10, ParamSpec, declare_params, request_exit, run_node,
                      stamp_to_ns)
 from .controller_node import PARAMS as CONTROLLER_PARAMS
 from .controller_node import _box
-from .sample_join import SampleJoin
+from .sample_join import POSITION_MAX, TENSION_MAX, WIND_MAX, RejectLog, SampleJoin, state_values
 from .topics import CRASHES, POSITION, SETPOINTS, STATE, STATUS, TENSION, WIND
 
 __all__ = ["OptimizerNode", "PARAMS", "main"]
@@ -34,22 +35,38 @@ __all__ = ["OptimizerNode", "PARAMS", "main"]
 _S = KiteRTOSettings()
 _E = _S.experiment
 PARAMS = (
-    ParamSpec("db", "rto.sqlite", "SQLite file of experiments and iterations (resume source)"),
+    ParamSpec("db", "rto.sqlite", "SQLite file of experiments and iterations (resume source), in an existing "
+              "directory"),
     ParamSpec("resume", True, "continue from the database if it holds a run"),
-    ParamSpec("n_iter", 10, "GMA iterations to run; then hold the last setpoints (0 = no limit)", 0, 10000),
-    ParamSpec("exit_when_done", False, "exit (code 0) once n_iter iterations are done"),
-    ParamSpec("n_laps", _E.n_laps, "whole laps averaged per experiment", 1, 100),
-    ParamSpec("settle_laps", _E.settle_laps, "whole laps dropped after a setpoint change", 0, 100),
-    ParamSpec("settle_time", _E.settle_time, "s after a setpoint change before a lap may count", 0.0, 600.0),
-    ParamSpec("max_duration", _E.max_duration, "s; an experiment ends with what it has after this", 1.0, 1e5),
+    ParamSpec("n_iter", 10, "GMA iterations to run, then hold the last setpoints (0 = no limit)", 0, 10000,
+              unit="iterations", runtime=True),
+    ParamSpec("exit_when_done", False, "exit (code 0) once n_iter iterations are done (needs n_iter > 0)",
+              runtime=True),
+    ParamSpec("n_laps", _E.n_laps, "whole laps averaged per experiment", 1, 100, unit="laps"),
+    ParamSpec("settle_laps", _E.settle_laps, "whole laps dropped after a setpoint change", 0, 100, unit="laps"),
+    ParamSpec("settle_time", _E.settle_time, "simulated time after a setpoint change before a lap may count "
+              "(< max_duration)", 0.0, 600.0, unit="s"),
+    ParamSpec("max_duration", _E.max_duration, "simulated time after which an experiment ends with what it has",
+              1.0, 1e5, unit="s"),
     ParamSpec("normalize", _E.normalize, "normalize lap tension by the measured reference wind"),
-    ParamSpec("h_min", _E.h_min, "minimum altitude, m", 0.0, 1000.0),
+    ParamSpec("h_min", _E.h_min, "minimum altitude (the constraint)", 0.0, 1000.0, unit="m"),
     ParamSpec("gradient", _S.gradient, "plant gradient estimation", choices=("forward", "central", "least_squares")),
-    ParamSpec("fd_step", float(_S.fd_step[0]), "finite-difference step, fraction of the box width", 0.01, 1.0),
-    ParamSpec("filter_gain", _S.filter_gain, "GMA input filter K", 0.01, 1.0),
-    ParamSpec("trust_radius", _S.trust_radius, "initial trust radius, fraction of the box width", 0.001, 10.0),
+    ParamSpec("fd_step", float(_S.fd_step[0]), "finite-difference step", 0.01, 1.0, unit="fraction of the box width"),
+    ParamSpec("filter_gain", _S.filter_gain, "GMA input filter K", 0.01, 1.0, unit="dimensionless"),
+    ParamSpec("trust_radius", _S.trust_radius, "initial trust radius (not below GMA's minimum trust radius)",
+              _S.trust_radius_min, 10.0, unit="fraction of the box width"),
     *[p for p in CONTROLLER_PARAMS if p.name.startswith("box_")],
 )
+
+
+def _cross_check(v: dict) -> None:
+    """Checks that involve several parameters (start-up and every runtime change)."""
+    if not v["settle_time"] < v["max_duration"]:
+        raise ParameterError(f"parameters settle_time = {v['settle_time']!r}, max_duration = {v['max_duration']!r}: "
+                             "expected settle_time < max_duration (else no lap can count)")
+    if v["exit_when_done"] and v["n_iter"] == 0:
+        raise ParameterError(f"parameters exit_when_done = {v['exit_when_done']!r}, n_iter = 0: expected n_iter > 0 "
+                             "when exit_when_done is true (n_iter = 0 never ends)")
 
 
 class OptimizerNode(Node):
@@ -57,7 +74,11 @@ class OptimizerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("optimizer", **kwargs)
-        v = self.p = declare_params(self, PARAMS)
+        v = self.p = declare_params(self, PARAMS, apply=self.apply_params, cross_check=_cross_check)
+        db_dir = os.path.dirname(os.path.abspath(v["db"]))
+        if v["db"] != ":memory:" and not os.path.isdir(db_dir):
+            raise ParameterError(f"parameter db = {v['db']!r}: expected a file in an existing directory "
+                                 f"({db_dir} is not one)")
         try:
             spec = replace(_E, n_laps=v["n_laps"], settle_laps=v["settle_laps"], settle_time=v["settle_time"],
                            max_duration=v["max_duration"], normalize=v["normalize"], h_min=v["h_min"])
@@ -83,7 +104,9 @@ class OptimizerNode(Node):
         self.create_subscription(Vector3Stamped, WIND, self.wind_callback, RELIABLE_10)
         self.create_subscription(UInt32, CRASHES, self.crashes_callback, LATCHED)
         self.create_timer(1.0, self.publish_status, clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self._last_stamp = -1
+        self._reject_log = RejectLog(self.get_logger())
+        self._crashes_seen = 0                 # last /kite/crashes count of the current plant
+        self._crash_offset = 0                 # counts of plants that restarted (their count starts at 0 again)
         self._started = False
         self.done = False
         self.phase = "waiting for the plant"
@@ -94,47 +117,71 @@ class OptimizerNode(Node):
         self.publish_setpoints(first.c)
         self.get_logger().info(f"optimizer up: first experiment {first.request_id}")
 
+    def apply_params(self, changes: dict) -> None:
+        """Runtime parameters: ``n_iter`` (checked at every sample) and ``exit_when_done`` (checked when done).
+
+        Once the run has ended, ``n_iter`` cannot change (restart the node: it resumes from ``db``), and
+        setting ``exit_when_done`` to true makes the node exit (code 0) half a second later.
+        """
+        if "n_iter" in changes and self.done:
+            raise ParameterError(f"parameter n_iter = {changes['n_iter']!r}: the run has ended ({self.phase}); "
+                                 f"restart the node to run more iterations (it resumes from {self.p['db']})")
+        if changes.get("exit_when_done") and self.done and self.phase == "done":
+            self.get_logger().info("exit_when_done set after the run ended: exiting")
+            self._exit_timer = self.create_timer(0.5, lambda: request_exit(self, 0),
+                                                 clock=Clock(clock_type=ClockType.STEADY_TIME))
+
     # ------------------------------------------------------------ measurements
     def state_callback(self, msg: JointState) -> None:
-        pos = finite_floats(msg.position, 3)
-        if pos is None:
-            return self._reject("state", list(msg.position), "3 finite angles (rad)")
+        try:
+            pos, _ = state_values(msg.name, msg.position, msg.velocity)
+        except ValueError as err:
+            return self._reject("state", f"rejected state message: {err}")
         self._part(msg.header.stamp, "state", pos)
 
     def tension_callback(self, msg: WrenchStamped) -> None:
         v = msg.wrench.force.x
-        if not (math.isfinite(v) and v >= 0.0):
-            return self._reject("tension", v, "a finite force >= 0 N")
+        if not (math.isfinite(v) and 0.0 <= v <= TENSION_MAX):
+            return self._reject("tension", f"rejected tension message {v!r}: expected a finite force in "
+                                           f"[0, {TENSION_MAX:g}] N")
         self._part(msg.header.stamp, "tension", v)
 
     def position_callback(self, msg: PointStamped) -> None:
-        p = finite_floats((msg.point.x, msg.point.y, msg.point.z), 3)
-        if p is None:
-            return self._reject("position", p, "a finite point in m")
-        self._part(msg.header.stamp, "position", tuple(p))
+        p = (msg.point.x, msg.point.y, msg.point.z)
+        if not all(math.isfinite(x) and abs(x) <= POSITION_MAX for x in p):
+            return self._reject("position", f"rejected position message {list(p)!r}: expected finite coordinates "
+                                            f"within +-{POSITION_MAX:g} m")
+        self._part(msg.header.stamp, "position", p)
 
     def wind_callback(self, msg: Vector3Stamped) -> None:
         v = msg.vector.x
-        if not (math.isfinite(v) and 0.0 <= v < 100.0):
-            return self._reject("wind", v, "a finite speed in [0, 100) m/s")
+        if not (math.isfinite(v) and 0.0 <= v < WIND_MAX):
+            return self._reject("wind", f"rejected wind message {v!r}: expected a finite speed in "
+                                        f"[0, {WIND_MAX:g}) m/s")
         self._part(msg.header.stamp, "wind", v)
 
     def crashes_callback(self, msg: UInt32) -> None:
-        self.join.crashes = int(msg.data)
+        n = int(msg.data)
+        if n < self._crashes_seen:             # a restarted plant counts from 0 again: not a crash, not un-crashed
+            self._crash_offset += self._crashes_seen
+        self._crashes_seen = n
+        self.join.crashes = self._crash_offset + n
 
     def _part(self, stamp_msg, part: str, value) -> None:
-        stamp = stamp_to_ns(stamp_msg)
-        if part == "state" and 0 <= stamp < self._last_stamp:
-            self.get_logger().warning(f"sim time jumped back to {stamp * 1e-9:.2f} s: plant restarted, the current "
+        m = self.join.add(stamp_to_ns(stamp_msg), part, value)
+        if self.join.discarded:
+            s, parts = self.join.discarded[-1]
+            self._reject("stamp", f"discarded {len(self.join.discarded)} sample(s) off the timeline, the last "
+                                  f"stamped {s * 1e-9:.3f} s ({', '.join(parts)}) at sim time "
+                                  f"{self.join.last * 1e-9:.3f} s: stale or future stamps")
+            self.join.discarded.clear()
+        if m is None:
+            return
+        if m.jumped_back:
+            self.get_logger().warning(f"sim time jumped back to {m.t:.2f} s: plant restarted, the current "
                                       "experiment starts again")
-            self.join.reset()
-            self._last_stamp = -1
             self._started = False
-        if part == "state":
-            self._last_stamp = max(self._last_stamp, stamp)
-        m = self.join.add(stamp, part, value)
-        if m is not None:
-            self.on_sample(m)
+        self.on_sample(m)
 
     def on_sample(self, m) -> None:
         if self.done:
@@ -147,7 +194,12 @@ class OptimizerNode(Node):
                 self.session.evaluator.start(m.t, self.session.c)
             self.phase = "experiment"
             return
+        request, repeats = self.session.request, self.session.repeats
         new = self.session.on_measurement(m)
+        if self.session.request is request and self.session.repeats > repeats:
+            self.get_logger().warning(f"experiment {request.request_id} invalid (kite crashed or no lap) at "
+                                      f"t = {m.t:.2f} s: its data is discarded, repeating it "
+                                      f"({self.session.repeats}/{self.session.max_repeats})")
         self._persist()
         if self.session.failed:
             self.phase = f"failed: {self.session.failed}"
@@ -220,8 +272,8 @@ class OptimizerNode(Node):
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_status.publish(msg)
 
-    def _reject(self, what, value, expected) -> None:
-        self.get_logger().warning(f"rejected {what} message {value!r}: expected {expected}", throttle_duration_sec=2.0)
+    def _reject(self, key: str, text: str) -> None:
+        self._reject_log(key, text)
 
     @staticmethod
     def _deg(c) -> str:

@@ -24,41 +24,52 @@ from ..core.plant import PLANT_PARAMS, KitePlant, NoiseSettings, PlantConfig
 from ..core.wind import TurbulenceSettings
 from .common import (LATCHED, RELIABLE_10, MessageTemplate, ParamSpec, declare_params, finite_floats, joint_state_from_raw,
                      request_exit, run_node, stamp_to_ns)
+from .sample_join import RejectLog
 from .topics import CLOCK, CRASHES, POSITION, STATE, STEERING, TENSION, WIND
 
 __all__ = ["PlantNode", "PARAMS", "main"]
+
+_LATE_NS = 500_000_000
+"""A steering command stamped up to 0.5 s before the current sample is late, not stale (both modes)."""
 
 _P = PLANT_PARAMS
 PARAMS = (
     ParamSpec("mode", "lockstep", "lockstep (deterministic, fast) or realtime (wall clock x rate_factor)",
               choices=("lockstep", "realtime")),
-    ParamSpec("rate_factor", 1.0, "realtime mode: simulated seconds per wall second", 0.01, 100.0),
+    ParamSpec("rate_factor", 1.0, "realtime mode: simulated seconds per wall second", 0.01, 100.0,
+              unit="sim s/wall s", runtime=True),
     ParamSpec("seed", 0, "seed of turbulence and measurement noise", 0, 2**31 - 1),
-    ParamSpec("duration", 0.0, "simulated seconds after which the node exits (0 = run until stopped)", 0.0, 1e7),
-    ParamSpec("dt", 0.02, "sample time, s", 0.001, 0.1),
-    ParamSpec("substeps", 1, "RK4 steps per sample", 1, 100),
-    ParamSpec("dead_time", 0.25, "steering dead time, s", 0.0, 5.0),
-    ParamSpec("rate_limit", 5.0, "steering rate limit, 1/s (normalized delta)", 0.01, 1000.0),
-    ParamSpec("r", _P.r, "tether length, m", 1.0, 5000.0),
-    ParamSpec("area", _P.area, "kite area, m^2", 0.1, 5000.0),
-    ParamSpec("rho", _P.rho, "air density, kg/m^3", 0.1, 2.0),
-    ParamSpec("E", _P.E, "glide ratio of the real kite", 0.5, 30.0),
-    ParamSpec("c_E", _P.c_E, "glide loss when steering: E - c_E delta^2", 0.0, 30.0),
-    ParamSpec("g_s", _P.g_s, "turning constant, rad/m", 0.001, 1.0),
-    ParamSpec("w_ref", _P.w_ref, "mean wind at z_ref, m/s", 0.5, 40.0),
-    ParamSpec("z_ref", _P.z_ref, "reference height of the wind profile, m", 0.5, 200.0),
-    ParamSpec("shear", _P.shear, "wind shear exponent", 0.0, 1.0),
+    ParamSpec("duration", 0.0, "simulated time after which the node exits (0: run until stopped)", 0.0, 1e7,
+              unit="s", runtime=True),
+    ParamSpec("dt", 0.02, "sample time", 0.001, 0.1, unit="s"),
+    ParamSpec("substeps", 1, "RK4 steps per sample", 1, 100, unit="steps"),
+    ParamSpec("dead_time", 0.25, "steering dead time (rounded to whole samples)", 0.0, 5.0, unit="s"),
+    ParamSpec("rate_limit", 5.0, "steering rate limit (normalized delta per second)", 0.01, 1000.0, unit="1/s"),
+    ParamSpec("r", _P.r, "tether length", 1.0, 5000.0, unit="m"),
+    ParamSpec("area", _P.area, "kite area", 0.1, 5000.0, unit="m^2"),
+    ParamSpec("rho", _P.rho, "air density", 0.1, 2.0, unit="kg/m^3"),
+    ParamSpec("E", _P.E, "glide ratio of the real kite (> c_E)", 0.5, 30.0, unit="dimensionless"),
+    ParamSpec("c_E", _P.c_E, "glide loss when steering: E - c_E delta^2 (< E)", 0.0, 30.0, unit="dimensionless"),
+    ParamSpec("g_s", _P.g_s, "turning constant", 0.001, 1.0, unit="rad/m"),
+    ParamSpec("w_ref", _P.w_ref, "mean wind at z_ref", 0.5, 40.0, unit="m/s"),
+    ParamSpec("z_ref", _P.z_ref, "reference height of the wind profile", 0.5, 200.0, unit="m"),
+    ParamSpec("shear", _P.shear, "wind shear exponent: w = w_ref (z/z_ref)^shear", 0.0, 1.0, unit="dimensionless"),
     ParamSpec("turbulence", True, "turbulence on the reference wind"),
-    ParamSpec("turbulence_intensity", 0.14, "gust std / mean wind", 0.0, 1.0),
-    ParamSpec("turbulence_length", 100.0, "turbulence length scale L_W, m", 1.0, 10000.0),
-    ParamSpec("anemometer_noise", 0.1, "anemometer white noise std, m/s", 0.0, 10.0),
-    ParamSpec("noise_angle_deg", 0.1, "angle measurement noise std, deg", 0.0, 10.0),
-    ParamSpec("noise_rate", 0.005, "angular-rate measurement noise std, rad/s", 0.0, 1.0),
-    ParamSpec("noise_tension", 0.01, "relative tension noise std", 0.0, 1.0),
-    ParamSpec("launch_theta_deg", 30.0, "theta after launch and after a crash, deg", 1.0, 89.0),
-    ParamSpec("command_timeout", 1.0, "wall seconds without steering before flying neutral", 0.01, 60.0),
-    ParamSpec("wait_subscribers", 1, "lockstep: subscribers of /kite/state to wait for before the first step", 0, 100),
-    ParamSpec("resend_period", 0.2, "lockstep: wall seconds before an unanswered sample is re-published", 0.005, 10.0),
+    ParamSpec("turbulence_intensity", 0.14, "gust standard deviation / mean wind", 0.0, 1.0, unit="dimensionless"),
+    ParamSpec("turbulence_length", 100.0, "turbulence length scale L_W (tau = L_W / w_ref)", 1.0, 10000.0, unit="m"),
+    ParamSpec("anemometer_noise", 0.1, "anemometer white-noise standard deviation", 0.0, 10.0, unit="m/s"),
+    ParamSpec("noise_angle_deg", 0.1, "angle measurement noise standard deviation", 0.0, 10.0, unit="deg"),
+    ParamSpec("noise_rate", 0.005, "angular-rate measurement noise standard deviation", 0.0, 1.0, unit="rad/s"),
+    ParamSpec("noise_tension", 0.01, "relative tension noise standard deviation (0.01 = 1 %)", 0.0, 1.0,
+              unit="dimensionless"),
+    ParamSpec("launch_theta_deg", 30.0, "theta after launch and after a crash (phi = psi = 0)", 1.0, 89.0,
+              unit="deg"),
+    ParamSpec("command_timeout", 1.0, "wall time without steering before flying neutral", 0.01, 60.0,
+              unit="s (wall)", runtime=True),
+    ParamSpec("wait_subscribers", 1, "lockstep: subscribers of /kite/state to wait for before the first step", 0,
+              100, unit="subscribers", runtime=True),
+    ParamSpec("resend_period", 0.2, "lockstep: wall time before an unanswered sample is re-published", 0.005, 10.0,
+              unit="s (wall)", runtime=True),
 )
 
 
@@ -113,7 +124,7 @@ class PlantNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("plant", **kwargs)
-        self.p = declare_params(self, PARAMS)
+        self.p = declare_params(self, PARAMS, apply=self.apply_params)
         self.plant = KitePlant(config_from_params(self.p), seed=self.p["seed"])
         self._dt_ns = round(self.p["dt"] * 1e9)
         self._lockstep = self.p["mode"] == "lockstep"
@@ -140,13 +151,29 @@ class PlantNode(Node):
         self._neutral = False
         self._commands = 0
         self._crashes = 0
+        self._reject = RejectLog(self.get_logger())        # throttled warnings about bad steering messages
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         if self._lockstep:
-            self.create_timer(min(0.05, self.p["resend_period"]), self.watchdog_callback, clock=steady)
+            self._timer = self.create_timer(self._timer_period(self.p), self.watchdog_callback, clock=steady)
         else:
-            self.create_timer(self.p["dt"] / self.p["rate_factor"], self.realtime_callback, clock=steady)
+            self._timer = self.create_timer(self._timer_period(self.p), self.realtime_callback, clock=steady)
         self.publish_sample()
         self.get_logger().info(f"plant up: mode={self.p['mode']} dt={self.p['dt']} s seed={self.p['seed']}")
+
+    def _timer_period(self, v: dict) -> float:
+        """Wall period of the stepping timer: the watchdog (lockstep) or one sample / rate_factor (realtime)."""
+        return min(0.05, v["resend_period"]) if self._lockstep else v["dt"] / v["rate_factor"]
+
+    def apply_params(self, changes: dict) -> None:
+        """Runtime parameters: ``rate_factor`` and ``resend_period`` re-time the stepping timer, ``duration`` moves
+        the end (a time already passed ends the run at the next step); ``command_timeout`` and
+        ``wait_subscribers`` are read where they are used."""
+        v = {**self.p, **changes}
+        if "duration" in changes:
+            self._end_step = round(v["duration"] / v["dt"]) if v["duration"] > 0 else None
+        period_ns = round(self._timer_period(v) * 1e9)
+        if period_ns != self._timer.timer_period_ns:
+            self._timer.timer_period_ns = period_ns
 
     # -------------------------------------------------------------- callbacks
     def steering_callback(self, msg) -> None:
@@ -159,23 +186,27 @@ class PlantNode(Node):
             else:
                 stamp, position = joint_state_from_raw(msg)
         except ValueError as exc:
-            self.get_logger().warning(f"rejected steering: {exc}", throttle_duration_sec=2.0)
+            self._reject("steering", f"rejected steering: {exc}")
             return
         values = finite_floats(position, 1)
         if values is None or abs(values[0]) > 1.0:
-            self.get_logger().warning(f"rejected steering {list(position)!r}: expected one finite delta in "
-                                      "[-1, 1]", throttle_duration_sec=2.0)
+            self._reject("steering", f"rejected steering {list(position)!r}: expected one finite delta in [-1, 1]")
             return
         now = self.plant.k * self._dt_ns
         if self._lockstep:
             if stamp != now:
-                return                     # an answer to an earlier sample (duplicate or late): ignore
+                # A late answer to an earlier sample (a duplicate after a re-publish) is normal: ignore it. A
+                # future stamp, or one older than 0.5 s, answers no sample this plant published: reject it.
+                if stamp > now or now - stamp > _LATE_NS:
+                    self._reject("steering stamp", f"rejected steering stamped {stamp * 1e-9:.3f} s at sim time "
+                                                   f"{now * 1e-9:.3f} s (stale or future)")
+                return
             if not self._commands and self.pub_state.get_subscription_count() < self.p["wait_subscribers"]:
                 self._waiting_log()
                 return                     # hold sample 0 until every expected observer is connected
-        elif stamp > now or now - stamp > max(5 * self._dt_ns, round(0.5e9)):
-            self.get_logger().warning(f"rejected steering stamped {stamp * 1e-9:.3f} s at sim time "
-                                      f"{now * 1e-9:.3f} s (stale or future)", throttle_duration_sec=2.0)
+        elif stamp > now or now - stamp > max(5 * self._dt_ns, _LATE_NS):
+            self._reject("steering stamp", f"rejected steering stamped {stamp * 1e-9:.3f} s at sim time "
+                                           f"{now * 1e-9:.3f} s (stale or future)")
             return
         self._delta = values[0]
         self._command_received()

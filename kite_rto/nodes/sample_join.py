@@ -1,44 +1,153 @@
-"""Join the plant's per-sample messages (state, tension, position, wind) by stamp into one measurement.
+"""Input hygiene for the nodes that read the plant: plausibility limits, throttled rejection warnings, and the
+join of the plant's per-sample messages (state, tension, position, wind) by stamp into one measurement.
 
 DDS orders messages per topic, not across topics; the optimizer needs all four readings of a sample. A sample is
 released when its four parts are in; parts of older samples that never completed are dropped.
+
+Stamps: the plant stamps every message of a sample with the sample's simulation time, and time only moves forward
+while the plant runs. A complete sample (every part with the same stamp) stamped before the last one, or more than
+:data:`MAX_STAMP_GAP_NS` after it, is off the timeline: a restarted plant (sim time jumped back), lost samples, or
+stale/future junk. It is held as a candidate and only accepted when the next complete sample continues it (a later
+stamp within the gap); if the old timeline goes on instead, it was junk and is reported. A lone part whose stamp
+matches no complete sample is never used; if it is far from the timeline it is reported as stale or future too
+(:attr:`SampleJoin.discarded`).
 """
 from __future__ import annotations
 
+import math
+import time
 from types import SimpleNamespace
 
-__all__ = ["SampleJoin"]
+__all__ = ["SampleJoin", "RejectLog", "state_values", "MAX_STAMP_GAP_NS", "ANGLE_MAX", "PSI_MAX", "RATE_MAX",
+           "TENSION_MAX", "POSITION_MAX", "WIND_MAX"]
 
 PARTS = ("state", "tension", "position", "wind")
 
+MAX_STAMP_GAP_NS = 1_000_000_000
+"""A stamp more than this (1 s of simulation time) away from the last sample is stale or future."""
+
+# Plausibility limits of the measurements (anything outside is a bad message, not a kite):
+ANGLE_MAX = math.pi          # |theta|, |phi|, rad
+PSI_MAX = 1000.0             # |psi|, rad (psi is not wrapped: it may wind up over loops)
+RATE_MAX = 100.0             # |theta_dot|, |phi_dot|, |psi_dot|, rad/s
+TENSION_MAX = 1e7            # line tension, N (the default kite pulls about 6e5 N)
+POSITION_MAX = 1e4           # |x|, |y|, |z|, m (tether 400 m by default)
+WIND_MAX = 100.0             # anemometer, m/s (in [0, WIND_MAX))
+STATE_NAMES = ["theta", "phi", "psi"]
+
+
+def state_values(names, position, velocity) -> tuple[list, list]:
+    """``(position, velocity)`` of a /kite/state message as floats; raises ``ValueError`` saying what is wrong."""
+    names = list(names)
+    if names != STATE_NAMES:
+        raise ValueError(f"names {names!r}: expected {STATE_NAMES}")
+    pos, vel = [float(v) for v in position], [float(v) for v in velocity]
+    if len(pos) != 3 or len(vel) != 3:
+        raise ValueError(f"{len(pos)} positions and {len(vel)} velocities: expected 3 of each")
+    if not all(map(math.isfinite, pos + vel)):
+        raise ValueError(f"position {pos!r}, velocity {vel!r}: expected finite numbers")
+    if abs(pos[0]) > ANGLE_MAX or abs(pos[1]) > ANGLE_MAX or abs(pos[2]) > PSI_MAX:
+        raise ValueError(f"position {pos!r}: expected |theta|, |phi| <= pi rad and |psi| <= {PSI_MAX:g} rad")
+    if max(map(abs, vel)) > RATE_MAX:
+        raise ValueError(f"velocity {vel!r}: expected rates within +-{RATE_MAX:g} rad/s")
+    return pos, vel
+
+
+class RejectLog:
+    """Throttled warnings about rejected input, throttled per ``key`` (e.g. the topic).
+
+    The first rejection of a key is logged at once; later ones at most once per ``period`` wall seconds, saying
+    how many were rejected without a warning in between. :attr:`counts` holds all rejections per key.
+    """
+
+    def __init__(self, logger, period: float = 2.0, clock=time.monotonic):
+        self._logger = logger
+        self.period = period
+        self._clock = clock
+        self._last: dict = {}
+        self._quiet: dict = {}
+        self.counts: dict = {}
+
+    def __call__(self, key: str, text: str) -> None:
+        self.counts[key] = self.counts.get(key, 0) + 1
+        now = self._clock()
+        last = self._last.get(key)
+        if last is not None and now - last < self.period:
+            self._quiet[key] = self._quiet.get(key, 0) + 1
+            return
+        self._last[key] = now
+        n = self._quiet.pop(key, 0)
+        self._logger.warning(text + (f" [{n} more rejected since the last warning]" if n else ""))
+
 
 class SampleJoin:
-    """Collects parts keyed by stamp (ns); :meth:`add` returns the completed measurement or None."""
+    """Collects parts keyed by stamp (ns); :meth:`add` returns the completed measurement or None.
 
-    def __init__(self, max_pending: int = 50):
+    The measurement has ``jumped_back = True`` when the timeline restarted before the previous sample (the plant
+    restarted; the measurement is the second sample of the new timeline, the first one was the candidate).
+    Parts and complete samples that can no longer be used and lie more than ``max_gap_ns`` from the timeline are
+    appended to :attr:`discarded` as ``(stamp, parts)`` (stale or future junk; the caller reports and clears it);
+    parts of a sample that lost one message are dropped silently.
+    """
+
+    def __init__(self, max_pending: int = 50, max_gap_ns: int = MAX_STAMP_GAP_NS):
         self._pending: dict[int, dict] = {}
         self._last = -1
         self.max_pending = max_pending
+        self.max_gap_ns = max_gap_ns
         self.crashes = 0
+        self.discarded: list[tuple[int, tuple]] = []
+        self._candidate = None                    # stamp of a complete sample off the timeline, not yet continued
+
+    @property
+    def last(self) -> int:
+        """Stamp (ns) of the last complete sample, -1 before the first."""
+        return self._last
 
     def reset(self) -> None:
-        """Forget everything (after a plant restart: sim time jumped back)."""
+        """Forget everything."""
         self._pending.clear()
         self._last = -1
+        self._candidate = None
 
     def add(self, stamp: int, part: str, value) -> SimpleNamespace | None:
-        if stamp <= self._last:
-            return None                           # duplicate (lockstep re-publish) or stale
-        entry = self._pending.setdefault(stamp, {})
+        if stamp == self._last:
+            return None                           # duplicate (lockstep re-publish)
+        pending = self._pending
+        entry = pending.get(stamp)
+        if entry is None:
+            if len(pending) >= self.max_pending:  # evict the oldest entry (first inserted): junk floods go first
+                old = next(iter(pending))
+                self.discarded.append((old, tuple(pending.pop(old))))
+            entry = pending[stamp] = {}
         entry[part] = value
         if len(entry) < len(PARTS):
-            if len(self._pending) > self.max_pending:
-                del self._pending[min(self._pending)]
             return None
-        del self._pending[stamp]
-        for old in [s for s in self._pending if s < stamp]:
-            del self._pending[old]
+        del pending[stamp]
+        last, gap, cand = self._last, self.max_gap_ns, self._candidate
+        if last < 0 or last < stamp <= last + gap:          # on the timeline
+            if cand is not None:
+                self.discarded.append((cand, PARTS))
+                self._candidate = None
+            jumped_back = False
+        elif cand is not None and cand < stamp <= cand + gap:   # continues the candidate: a new timeline
+            self._candidate = None
+            jumped_back = stamp < last
+        else:                                               # off the timeline: hold it as the candidate
+            if cand is not None and cand != stamp:
+                self.discarded.append((cand, PARTS))
+            self._candidate = stamp
+            return None
+        if pending:
+            gap = self.max_gap_ns
+            for s in list(pending):
+                if jumped_back:                   # the old timeline: gone with the old plant
+                    del pending[s]
+                elif s < stamp or s > stamp + gap:
+                    parts = tuple(pending.pop(s))
+                    if s < stamp - gap or s > stamp + gap:
+                        self.discarded.append((s, parts))
         self._last = stamp
         (theta, phi, psi), tension, position, wind = (entry[p] for p in PARTS)
         return SimpleNamespace(t=stamp * 1e-9, theta=theta, phi=phi, psi=psi, tension=tension, position=position,
-                               wind_ref=wind, crashes=self.crashes, stamp=stamp)
+                               wind_ref=wind, crashes=self.crashes, stamp=stamp, jumped_back=jumped_back)

@@ -1,11 +1,12 @@
 """The main job's ``optimize`` mode: plant + controller + optimizer as three processes, then the report."""
 from __future__ import annotations
 
+import math
 import re
 import time
 from pathlib import Path
 
-from .graph import NodeProcess
+from .graph import NodeProcess, stop_all
 
 _PROGRESS = re.compile(r"\[optimizer\]: (experiment|iteration|done|resumed|refusing|failed)(.*)")
 
@@ -20,69 +21,135 @@ def _wait(pred, rec, timeout: float) -> bool:
     return pred()
 
 
-def optimize(args, env, out: Path) -> int:
+def experiments_per_iteration(gradient: str = "forward", n_c: int = 3) -> int:
+    """Nominal + perturbation experiments of one GMA iteration (forward: 1 + n_c, central: 1 + 2 n_c)."""
+    return 1 + (2 * n_c if gradient == "central" else n_c)
+
+
+class OptimizeProgress:
+    """Progress of the GMA run from the optimizer's /rto/status: iteration k/N, experiment, ETA.
+
+    The ETA extrapolates the wall time per finished experiment of this run (experiments of earlier runs, when
+    resuming, do not count) to the experiments still to do; before the first one finishes it is unknown.
+    """
+
+    def __init__(self, n_iter: int, per_iteration: int):
+        self.n_iter = n_iter
+        self.per_iteration = per_iteration
+        self.done0 = None
+        self.t0 = None
+
+    def text(self, status: dict, sim_t: float, wall_flying: float) -> str:
+        try:
+            k = int(status.get("iteration", 0))
+            done = int(status.get("experiments_done", 0))
+        except ValueError:
+            k, done = 0, 0
+        if self.done0 is None and status:
+            self.done0, self.t0 = done, wall_flying
+        total = self.n_iter * self.per_iteration
+        in_iter = done - k * self.per_iteration
+        if k >= self.n_iter:
+            return f"  t = {sim_t:6.0f} s sim, all {self.n_iter} iterations done, finishing"
+        eta = None
+        if self.done0 is not None and done > self.done0:
+            per_exp = (wall_flying - self.t0) / (done - self.done0)
+            eta = per_exp * max(total - done, 0)
+        from .demo import eta_text
+        rate = sim_t / max(wall_flying, 1e-9)
+        exp = status.get("experiment", "")
+        return (f"  t = {sim_t:6.0f} s sim ({rate:4.1f}x real time), "
+                f"iteration {min(k + 1, self.n_iter)}/{self.n_iter}, "
+                f"experiment {min(max(in_iter, 0) + 1, self.per_iteration)}/{self.per_iteration}"
+                + (f" ({exp})" if exp else "") + f", {100.0 * done / max(total, 1):3.0f} % done, {eta_text(eta)}")
+
+
+def optimize(args, env, out: Path, progress) -> int:
     import rclpy
 
+    from ..core.kite_rto import KiteRTOSettings
     from ..gma import HistoryStore
+    from .demo import recorder_summary, ros_init, start_recorder
     from .recorder import Recorder
     from .rto_report import write_report
 
     db = out / "rto.sqlite"
     if db.exists() and not args.resume:
         db.unlink()
-    plant_params = {"seed": args.seed, "wait_subscribers": 3}    # controller, optimizer, recorder
-    if args.no_turbulence:
-        plant_params.update(turbulence=False, anemometer_noise=0.0, noise_angle_deg=0.0, noise_rate=0.0, noise_tension=0.0)
     print(f"kite_rto demo: GMA on the simulated kite, {args.iterations} iterations, lockstep, seed {args.seed}, "
-          f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']} (node output in {out / 'nodes.log'})", flush=True)
-    rclpy.init()
+          f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']} (node output in {out / 'nodes.log'}; Ctrl-C stops cleanly, "
+          "--resume continues)", flush=True)
+    ros_init()
     rec = Recorder()
     log = open(out / "nodes.log", "a" if args.resume else "w")
     procs = []
     wall0 = time.monotonic()
-    code = 1
+    code, interrupted = 1, False
+    tracker = OptimizeProgress(args.iterations, experiments_per_iteration(KiteRTOSettings().gradient))
     try:
+        extra = start_recorder(args, log, env, rec, procs)
+        plant_params = {"seed": args.seed, "wait_subscribers": 3 + extra}   # controller, optimizer, demo (+ recorder)
+        if args.no_turbulence:
+            plant_params.update(turbulence=False, anemometer_noise=0.0, noise_angle_deg=0.0, noise_rate=0.0,
+                                noise_tension=0.0)
         opt = NodeProcess("optimizer", {"db": str(db), "n_iter": args.iterations, "exit_when_done": True},
                           log=log, env=env)
         procs.append(opt)
         print("  starting the optimizer (builds the model's NLPs, ~10-30 s) ...", flush=True)
         if not _wait(lambda: rec.setpoints or not opt.alive(), rec, 300):
-            raise RuntimeError("the optimizer published no setpoints")
+            raise RuntimeError("the optimizer published no setpoints within 300 s")
+        if not opt.alive():
+            raise RuntimeError(f"the optimizer exited with code {opt.proc.returncode}; see {out / 'nodes.log'}")
         ctrl = NodeProcess("controller", {}, log=log, env=env)
         procs.append(ctrl)
         _wait(lambda: any("new setpoints" in ln for ln in ctrl.lines) or not ctrl.alive(), rec, 120)
         plant = NodeProcess("plant", plant_params, log=log, env=env)
         procs.append(plant)
         shown = 0
+        fly0 = None
         while opt.alive() and plant.alive() and ctrl.alive():
             rclpy.spin_once(rec, timeout_sec=0.1)
+            if fly0 is None and rec.samples:
+                fly0 = time.monotonic()
             for line in opt.lines[shown:]:
                 m = _PROGRESS.search(line)
                 if m:
-                    t = rec.samples[-1][0] if rec.samples else 0.0
-                    rate = t / max(time.monotonic() - wall0, 1e-9)
-                    print(f"  [t = {t:6.0f} s sim, {rate:4.1f}x real time] {m.group(1)}{m.group(2)}", flush=True)
+                    t = rec.sim_time
+                    rate = t / max(time.monotonic() - (fly0 or wall0), 1e-9)
+                    progress.event(f"  [t = {t:6.0f} s sim, {rate:4.1f}x real time] {m.group(1)}{m.group(2)}")
             shown = len(opt.lines)
-        code = opt.proc.wait(timeout=30)
+            if fly0 is not None and time.monotonic() - fly0 > 0.5:
+                progress.update(tracker.text(rec.status, rec.sim_time, time.monotonic() - fly0))
+        end = time.monotonic() + 30.0
+        while opt.alive() and time.monotonic() < end:
+            rclpy.spin_once(rec, timeout_sec=0.1)
+        code = opt.proc.returncode if opt.proc.poll() is not None else 1
         if code != 0:
             print(f"the optimizer exited with code {code}; see {out / 'nodes.log'}")
     except KeyboardInterrupt:
-        print("\ninterrupted: stopping the nodes (the optimizer's database keeps every finished experiment; "
-              "--resume continues)")
-        code = 130
+        interrupted, code = True, 130
     finally:
-        for p in reversed(procs):
-            p.stop()
+        progress.clear()
+        stop_all(list(reversed(procs)))
         log.close()
         rec.destroy_node()
         rclpy.try_shutdown()
+    if interrupted:
+        print(f"\ninterrupted: every node stopped. The optimizer's database {db} keeps every finished experiment; "
+              f"--resume continues the run", flush=True)
+    recorder_summary(procs)
     wall = time.monotonic() - wall0
     history = HistoryStore(db).load() if db.exists() else None
     if history is None or not history.iterations:
         print("no completed iteration to report")
         return code or 1
-    sim = rec.samples[-1][0] if rec.samples else float("nan")
-    print(f"\nflew {sim:.0f} s of simulated time in {wall:.0f} s wall ({sim / wall:.1f}x real time)")
-    write_report(history, out, samples=rec.arrays() if rec.samples else None, laps=rec.laps,
-                 extra={"wall_s": wall, "sim_s": sim, "seed": args.seed, "turbulence": not args.no_turbulence})
+    sim = rec.sim_time if rec.samples else math.nan
+    print(f"\n{'partial report: ' if interrupted else ''}flew {sim:.0f} s of simulated time in {wall:.0f} s wall "
+          f"({sim / wall:.1f}x real time)")
+    if interrupted:
+        print(f"(measured values only; the full report, judged on the deterministic plant: "
+              f"python -m kite_rto.tools.rto_report --db {db} --out {out})")
+    write_report(history, out, samples=rec.arrays() if rec.samples else None, laps=rec.laps, judge=not interrupted,
+                 extra={"wall_s": wall, "sim_s": sim, "seed": args.seed, "turbulence": not args.no_turbulence,
+                        "interrupted": interrupted})
     return code

@@ -7,11 +7,33 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 
-__all__ = ["NodeProcess", "isolated_ros_env", "node_command", "start_node", "stop_node"]
+__all__ = ["NodeProcess", "isolated_ros_env", "node_command", "start_node", "start_process", "stop_node",
+           "stop_all"]
 
 MODULES = {"plant": "kite_rto.nodes.plant_node", "controller": "kite_rto.nodes.controller_node",
            "optimizer": "kite_rto.nodes.optimizer_node", "echo_pilot": "kite_rto.nodes.echo_pilot"}
+_PR_SET_PDEATHSIG = 1
+
+
+def _prctl():
+    """libc's prctl, looked up in the parent (the child between fork and exec must not import anything)."""
+    try:
+        import ctypes
+        return ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+
+
+_PRCTL = _prctl() if sys.platform.startswith("linux") else None
+
+
+def _die_with_parent():
+    """In the child before exec: ask Linux to send SIGTERM when the parent dies (even by SIGKILL), so that a
+    killed launcher leaves no orphan nodes. (Tied to the thread that started the child: start from the main
+    thread.)"""
+    _PRCTL(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
 
 
 def node_command(name: str, params: dict | None = None) -> list[str]:
@@ -22,10 +44,17 @@ def node_command(name: str, params: dict | None = None) -> list[str]:
     return cmd
 
 
-def start_node(name: str, params: dict | None = None, env=None) -> subprocess.Popen:
+def start_process(cmd: list, env=None, die_with_parent: bool = False) -> subprocess.Popen:
+    """Start ``cmd`` in its own session and process group (a terminal's Ctrl-C does not reach it: the launcher
+    stops it), output (stdout + stderr) on a text pipe; ``die_with_parent``: SIGTERM it if the launcher dies."""
+    return subprocess.Popen(cmd, env=env or dict(os.environ), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, start_new_session=True,
+                            preexec_fn=_die_with_parent if die_with_parent and _PRCTL is not None else None)
+
+
+def start_node(name: str, params: dict | None = None, env=None, die_with_parent: bool = False) -> subprocess.Popen:
     """Start a node in its own process group, output (stdout + stderr) on a text pipe."""
-    return subprocess.Popen(node_command(name, params), env=env or dict(os.environ), stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    return start_process(node_command(name, params), env, die_with_parent)
 
 
 def stop_node(proc: subprocess.Popen, timeout: float = 10.0) -> str:
@@ -51,15 +80,16 @@ def isolated_ros_env(domain_id: int | None = None) -> dict:
 
 
 class NodeProcess:
-    """One node in its own process, the same entry point as ``ros2 run kite_rto <name>``.
+    """One node in its own process, the same entry point as ``ros2 run kite_rto <name>`` (or any ``cmd``).
 
-    Its output lines go to ``log`` (a file object) and are kept in ``lines``.
+    Its output lines go to ``log`` (a file object) and are kept in ``lines``. The process gets SIGTERM if the
+    launcher dies without stopping it.
     """
 
-    def __init__(self, name: str, params: dict | None = None, log=None, env=None):
+    def __init__(self, name: str, params: dict | None = None, log=None, env=None, cmd: list | None = None):
         self.name = name
         self.lines: list[str] = []
-        self.proc = start_node(name, params, env)
+        self.proc = start_process(cmd or node_command(name, params), env, die_with_parent=True)
         self._log = log
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
@@ -74,14 +104,42 @@ class NodeProcess:
     def alive(self) -> bool:
         return self.proc.poll() is None
 
-    def stop(self, timeout: float = 10.0) -> int:
-        """Ctrl-C the node, wait, kill it if it hangs; return its exit code."""
+    def interrupt(self) -> None:
+        """Send Ctrl-C (SIGINT) if it still runs."""
         if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
             try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
+                self.proc.send_signal(signal.SIGINT)
+            except ProcessLookupError:
+                pass
+
+    def stop(self, timeout: float = 10.0) -> int:
+        """Ctrl-C the node, wait, kill its process group if it hangs; return its exit code."""
+        self.interrupt()
+        try:
+            self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            try:
                 os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait()
+            except ProcessLookupError:
+                pass
+            self.proc.wait()
         self._reader.join(timeout=2.0)
         return self.proc.returncode
+
+
+def stop_all(procs, timeout: float = 10.0) -> None:
+    """Stop several :class:`NodeProcess` at once: Ctrl-C all of them in the given order, then wait for each
+    (killing what hangs past ``timeout`` s in total). A second Ctrl-C of the launcher meanwhile is ignored, so the
+    nodes are always reaped."""
+    previous = signal.getsignal(signal.SIGINT) if threading.current_thread() is threading.main_thread() else None
+    if previous is not None:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        for p in procs:
+            p.interrupt()
+        deadline = time.monotonic() + timeout
+        for p in procs:
+            p.stop(max(0.1, deadline - time.monotonic()))
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
