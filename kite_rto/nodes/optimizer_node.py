@@ -20,12 +20,10 @@ from std_msgs.msg import UInt32
 
 from ..core.kite_rto import KiteRTOSettings, RTOSession, make_kite_gma
 from ..core.params import KiteParams, ParameterError
-from ..core.path import Setpoints, SetpointError, validate_setpoints
+from ..core.path import Setpoints, SetpointError, ShapeBox, setpoints_from_shape, validate_setpoints
 from ..gma import HistoryStore
 from .common import (LATCHED, RELIABLE_10, ParamSpec, declare_params, finite_floats, request_exit, run_node,
                      stamp_to_ns)
-from .controller_node import PARAMS as CONTROLLER_PARAMS
-from .controller_node import _box
 from .sample_join import SampleJoin
 from .topics import CRASHES, POSITION, SETPOINTS, STATE, STATUS, TENSION, WIND
 
@@ -45,11 +43,33 @@ PARAMS = (
     ParamSpec("normalize", _E.normalize, "normalize lap tension by the measured reference wind"),
     ParamSpec("h_min", _E.h_min, "minimum altitude, m", 0.0, 1000.0),
     ParamSpec("gradient", _S.gradient, "plant gradient estimation", choices=("forward", "central", "least_squares")),
-    ParamSpec("fd_step", float(_S.fd_step[0]), "finite-difference step, fraction of the box width", 0.01, 1.0),
+    ParamSpec("fd_step", float(_S.fd_step[0]), "finite-difference step, fraction of the shape box width", 0.01, 1.0),
     ParamSpec("filter_gain", _S.filter_gain, "GMA input filter K", 0.01, 1.0),
     ParamSpec("trust_radius", _S.trust_radius, "initial trust radius, fraction of the box width", 0.001, 10.0),
-    *[p for p in CONTROLLER_PARAMS if p.name.startswith("box_")],
+    ParamSpec("box_theta_0_deg", [math.degrees(v) for v in _S.box.theta_0], "optimizer's theta_0 range [low, high], deg"),
+    ParamSpec("box_A_phi_deg", [math.degrees(v) for v in _S.box.A_phi], "optimizer's A_phi range [low, high], deg"),
+    ParamSpec("box_aspect", list(_S.box.aspect), "optimizer's aspect range [low, high], dimensionless: "
+              "A_theta / sqrt(sin theta_0 A_phi)"),
 )
+
+
+def _shape_box(v: dict) -> ShapeBox:
+    """The optimizer's :class:`ShapeBox` from the box parameters; every point of a 3x3x3 grid must track."""
+    pairs = {}
+    for name, key, scale in (("theta_0", "box_theta_0_deg", math.pi / 180), ("A_phi", "box_A_phi_deg", math.pi / 180),
+                             ("aspect", "box_aspect", 1.0)):
+        pair = v[key]
+        if len(pair) != 2:
+            raise ParameterError(f"parameter {key} = {list(pair)!r}: expected [low, high]")
+        pairs[name] = (pair[0] * scale, pair[1] * scale)
+    try:
+        box = ShapeBox(**pairs)
+        for x in box.grid(3):
+            validate_setpoints(setpoints_from_shape(x), box.setpoint_box(), KiteParams())
+    except SetpointError as err:
+        raise ParameterError(f"optimizer box {v['box_theta_0_deg']}, {v['box_A_phi_deg']}, {v['box_aspect']}: "
+                             f"{err}") from None
+    return box
 
 
 class OptimizerNode(Node):
@@ -61,7 +81,7 @@ class OptimizerNode(Node):
         try:
             spec = replace(_E, n_laps=v["n_laps"], settle_laps=v["settle_laps"], settle_time=v["settle_time"],
                            max_duration=v["max_duration"], normalize=v["normalize"], h_min=v["h_min"])
-            self.settings = replace(_S, experiment=spec, box=_box(v), gradient=v["gradient"],
+            self.settings = replace(_S, experiment=spec, box=_shape_box(v), gradient=v["gradient"],
                                     fd_step=(v["fd_step"],) * 3, filter_gain=v["filter_gain"],
                                     trust_radius=v["trust_radius"])
         except ValueError as err:
@@ -91,7 +111,7 @@ class OptimizerNode(Node):
         if history is not None:
             self.get_logger().info(f"resumed from {v['db']}: {len(history.experiments)} experiments, "
                                    f"{len(history.iterations)} iterations")
-        self.publish_setpoints(first.c)
+        self.publish_setpoints(setpoints_from_shape(first.c))
         self.get_logger().info(f"optimizer up: first experiment {first.request_id}")
 
     # ------------------------------------------------------------ measurements
@@ -174,7 +194,7 @@ class OptimizerNode(Node):
 
     def finish(self) -> None:
         rec = self.gma.records[-1]
-        self.publish_setpoints(rec.c_next)
+        self.publish_setpoints(setpoints_from_shape(rec.c_next))
         self.done = True
         self.phase = "done"
         self.publish_status()
@@ -184,8 +204,8 @@ class OptimizerNode(Node):
 
     # ----------------------------------------------------------------- output
     def publish_setpoints(self, c) -> None:
-        """Publish ``c`` (rad) after checking it against the safe box and the controller's turn limit."""
-        box = self.settings.box
+        """Publish setpoints ``c`` (rad) after checking them against the safe box and the turn limit."""
+        box = self.settings.box.setpoint_box()
         try:
             validate_setpoints(np.asarray(c, dtype=float), box, KiteParams())
         except SetpointError as err:
@@ -224,8 +244,9 @@ class OptimizerNode(Node):
         self.get_logger().warning(f"rejected {what} message {value!r}: expected {expected}", throttle_duration_sec=2.0)
 
     @staticmethod
-    def _deg(c) -> str:
-        return "(" + ", ".join(f"{math.degrees(x):.2f}" for x in np.asarray(c, dtype=float)) + ") deg"
+    def _deg(x) -> str:
+        """Setpoints in degrees of GMA's shape coordinates ``x``."""
+        return "(" + ", ".join(f"{math.degrees(v):.2f}" for v in setpoints_from_shape(x)) + ") deg"
 
     @staticmethod
     def _vec(v) -> str:

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.oracle import find_oracle, plant_performance
-from ..core.path import FigureEightPath, SetpointBox, Setpoints
+from ..core.path import FigureEightPath, Setpoints, ShapeBox, setpoints_from_shape
 from ..core.plant import PlantConfig
 from ..gma import HistoryStore
 
@@ -27,8 +27,9 @@ def _deg(c) -> str:
 
 
 def judge_iterates(history, config: PlantConfig, oracle, h_min: float = 100.0) -> list[dict]:
-    """One row per iterate c_0 .. c_K: measured values (if any) and the deterministic-plant judgement."""
-    iterates = [np.asarray(history.c0)] + [np.asarray(r.c_next) for r in history.iterations]
+    """One row per iterate c_0 .. c_K (GMA's shape coordinates, judged as setpoints): measured values (if any)
+    and the deterministic-plant judgement."""
+    iterates = [setpoints_from_shape(history.c0)] + [setpoints_from_shape(r.c_next) for r in history.iterations]
     rows = []
     for k, c in enumerate(iterates):
         t_kn, z = plant_performance(config, c)
@@ -42,11 +43,11 @@ def judge_iterates(history, config: PlantConfig, oracle, h_min: float = 100.0) -
     return rows
 
 
-def write_report(history, out: Path, config: PlantConfig | None = None, box: SetpointBox | None = None,
+def write_report(history, out: Path, config: PlantConfig | None = None, box: ShapeBox | None = None,
                  samples=None, laps=None, extra: dict | None = None) -> dict:
     """Print the per-iteration table, save figures and ``summary.json`` in ``out``; return the summary."""
     config = config or PlantConfig()
-    box = box or SetpointBox()
+    box = box or ShapeBox()
     print("\ncomputing the oracle (direct optimization of the deterministic plant; cached in runs/) ...", flush=True)
     oracle = find_oracle(config, box)
     rows = judge_iterates(history, config, oracle)
