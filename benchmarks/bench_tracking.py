@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from kite_rto.core.closed_loop import make_closed_loop, run_closed_loop
-from kite_rto.core.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox
+from kite_rto.core.path import DEFAULT_SETPOINTS, FigureEightPath, Setpoints, ShapeBox, setpoints_from_shape
 from kite_rto.core.plant import PlantConfig
 
 TARGETS = {"disturbed": 1.5, "quiet": 0.5}
@@ -45,11 +45,11 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=300.0, help="measured flight after the transient, s")
     ap.add_argument("--settle", type=float, default=60.0, help="transient excluded from the statistics, s")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--all-corners", action="store_true", help="all 8 box corners instead of 3")
+    ap.add_argument("--all-corners", action="store_true", help="all 8 corners of the optimizer's box instead of 3")
     args = ap.parse_args(argv)
-    corners = SetpointBox().corners()
+    corners = [Setpoints.from_array(setpoints_from_shape(x)) for x in ShapeBox().grid(2)]
     cases = [("default", DEFAULT_SETPOINTS)]
-    picks = range(8) if args.all_corners else (0, 1, 6)   # tightest turn, lowest-theta wide, highest-theta flat
+    picks = range(8) if args.all_corners else (0, 1, 6)   # smallest flat, smallest tall (tightest turn), largest flat
     cases += [(f"corner{i}", corners[i]) for i in picks]
     configs = {"disturbed": PlantConfig(), "quiet": PlantConfig().without_disturbances()}
     head = (f"{'case':9} {'theta_0/A_phi/A_theta deg':>25} {'R_eff m':>7} {'plant':>9} {'RMS deg':>7} {'max deg':>7} "

@@ -6,7 +6,7 @@ import pytest
 
 from kite_rto.core.closed_loop import make_closed_loop, run_closed_loop
 from kite_rto.core.laps import LapDetector
-from kite_rto.core.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox
+from kite_rto.core.path import DEFAULT_SETPOINTS, FigureEightPath, Setpoints, ShapeBox, setpoints_from_shape
 from kite_rto.core.plant import PlantConfig
 
 QUIET = PlantConfig().without_disturbances()
@@ -99,8 +99,9 @@ def test_dt_mismatch_rejected():
 @pytest.mark.slow
 @pytest.mark.parametrize("corner", range(8))
 def test_no_crash_for_an_hour_at_each_box_corner(corner):
-    """Default turbulence, noise and 0.25 s dead time, one simulated hour per corner (~1 min each)."""
-    c = SetpointBox().corners()[corner]
+    """Default turbulence, noise and 0.25 s dead time, one simulated hour per corner of the optimizer's
+    box (~1 min each)."""
+    c = Setpoints.from_array(setpoints_from_shape(ShapeBox().grid(2)[corner]))
     plant, ctl = make_closed_loop(c, PlantConfig(), seed=corner)
     r = run_closed_loop(plant, ctl, 3600.0, record=False)
     assert r.crashes == 0

@@ -9,7 +9,7 @@ import pytest
 from kite_rto.core.closed_loop import make_closed_loop, run_closed_loop
 from kite_rto.core.controller import ControllerSettings, PathController
 from kite_rto.core.params import KiteParams, ParameterError
-from kite_rto.core.path import DEFAULT_SETPOINTS, SetpointBox, SetpointError, Setpoints
+from kite_rto.core.path import DEFAULT_SETPOINTS, SetpointBox, SetpointError, Setpoints, ShapeBox
 from kite_rto.core.plant import PlantConfig, shared_model
 
 QUIET = PlantConfig().without_disturbances()
@@ -67,10 +67,9 @@ def test_uses_only_measured_quantities_and_saturates():
 
 
 def test_smooth_setpoint_change():
-    """Switching between box corners in flight: no steering jump, no crash, small error on the moving path,
+    """Switching to another figure in flight: no steering jump, no crash, small error on the moving path,
     and the blend beats an instantaneous switch."""
-    box = SetpointBox()
-    new = Setpoints(box.theta_0[1], box.A_phi[1], box.A_theta[1])
+    new = Setpoints.from_array(ShapeBox().from_unit([0.8, 0.5, 0.5]))    # (38, 52, 8.1) deg
     results = {}
     for blend in (10.0, 0.0):
         plant, ctl = make_closed_loop(DEFAULT_SETPOINTS, QUIET, seed=0, settings=ControllerSettings(blend_time=blend))

@@ -14,6 +14,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from kite_rto.core.path import setpoints_from_shape
 from kite_rto.core.closed_loop import make_closed_loop
 from kite_rto.core.controller import ControllerSettings
 from kite_rto.core.experiment import ExperimentSpec
@@ -70,7 +71,7 @@ def check_iteration(db, pure, done_before=(), *logs):
     """(experiments lost, repeated, max setpoint difference to the pure runner rad, history) of the stored run."""
     history, counts = stored(db)
     ids = [q.request_id for q, _ in history.experiments]
-    c = np.array([q.c for q, _ in history.experiments])
+    c = np.array([setpoints_from_shape(q.c) for q, _ in history.experiments])   # GMA: shape coordinates
     pure_c = np.array([e.c for e in pure.experiments])
     dc = float(np.max(np.abs(c - pure_c))) if c.shape == pure_c.shape else math.inf
     lost = len(set(done_before) - set(ids)) + max(0, len(pure.experiments) - len(set(ids)))

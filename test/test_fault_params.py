@@ -40,7 +40,7 @@ CASES = [
     ("empty setpoint box", "controller", ["-p", "box_theta_0_deg:=[]"],
      ["parameter box_theta_0_deg = <empty or not set>", "expected a list of 2 numbers, each in [1, 89] deg"]),
     ("initial setpoint outside the box", "controller", ["-p", "theta_0_deg:=20.0"],
-     ["initial setpoints (theta_0_deg, A_phi_deg, A_theta_deg)", "outside the box", "[30, 38] deg"]),
+     ["initial setpoints (theta_0_deg, A_phi_deg, A_theta_deg)", "outside the box", "[30, 40] deg"]),
     ("negative controller gain", "controller", ["-p", "k_psi:=-3.0"],
      ["parameter k_psi = -3.0", "expected a number in [0.01, 100] 1/s"]),
     ("NaN steering limit", "controller", ["-p", "delta_max:=.nan"],
@@ -55,8 +55,10 @@ CASES = [
      ["parameters exit_when_done = True, n_iter = 0", "expected n_iter > 0"]),
     ("database in a missing directory", "optimizer", ["-p", "db:={missing}/rto.sqlite"],
      ["parameter db = '{missing}/rto.sqlite'", "expected a file in an existing directory"]),
-    ("inverted optimizer box", "optimizer", ["-p", "box_A_theta_deg:=[7.5,6.5]"],
-     ["parameter box_A_theta_deg = [7.5, 6.5]", "with low <= high"]),
+    ("inverted optimizer box", "optimizer", ["-p", "box_aspect:=[0.22,0.16]"],
+     ["parameter box_aspect = [0.22, 0.16]", "with low < high"]),
+    ("untrackable optimizer box", "optimizer", ["-p", "box_aspect:=[0.10,0.22]"],
+     ["box_aspect = [0.1, 0.22]", "trackable", "infeasible turn"]),
 ]
 
 

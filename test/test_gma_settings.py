@@ -27,6 +27,8 @@ def test_defaults_are_valid_and_round_trip():
 @pytest.mark.parametrize("field, value, expected", [
     ("filter_gain", 0.0, "(0.0, 1.0]"),
     ("filter_gain", [0.5, 1.5], "(0.0, 1.0]"),
+    ("modifier_filter", 0.0, "(0.0, 1.0]"),
+    ("modifier_filter", 1.5, "(0.0, 1.0]"),
     ("trust_radius", -1.0, "(0.0, inf]"),
     ("trust_shrink", 1.0, "(0.0, 1.0)"),
     ("trust_grow", 0.5, "[1.0, inf]"),

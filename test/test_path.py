@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from kite_rto.core.params import KiteParams
-from kite_rto.core.path import (DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, SetpointError, Setpoints,
+from kite_rto.core.path import (DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, SetpointError, Setpoints, ShapeBox,
+                                setpoints_from_shape, shape_from_setpoints,
                                 required_turn_radius, validate_setpoints)
 from kite_rto.core.projection import project_samples
 
@@ -97,10 +98,52 @@ def test_projection_round_trip(c):
     assert project_samples(th, ph) == pytest.approx(c.as_array(), abs=1e-9)
 
 
-def test_default_box_corners_and_default_setpoints_are_valid():
+def test_default_setpoints_are_valid():
     box = SetpointBox()
-    for c in box.corners() + [DEFAULT_SETPOINTS, box.centre()]:
-        assert validate_setpoints(c, box) == c
+    assert validate_setpoints(DEFAULT_SETPOINTS, box) == DEFAULT_SETPOINTS
+
+
+def test_every_point_of_the_default_shape_box_is_trackable():
+    """The optimizer's box: a 7x7x7 grid in shape coordinates passes validate_setpoints (default margin)."""
+    shape = ShapeBox()
+    box = shape.setpoint_box()
+    assert box == SetpointBox() or all(
+        lo_d <= lo_s and hi_s <= hi_d
+        for name in Setpoints.names()
+        for (lo_s, hi_s), (lo_d, hi_d) in [(getattr(box, name), getattr(SetpointBox(), name))])
+    for x in shape.grid(7):
+        validate_setpoints(setpoints_from_shape(x), SetpointBox())
+
+
+def test_the_bounding_setpoint_box_is_not_all_trackable():
+    """Why the optimizer needs shape coordinates: a corner of the bounding box (30, 42, 10.5) deg is a too
+    tall figure, (40, 62, 5.5) deg a too flat one."""
+    for c in (Setpoints.from_degrees(30, 42, 10.5), Setpoints.from_degrees(40, 62, 5.5)):
+        with pytest.raises(SetpointError, match="infeasible turn"):
+            validate_setpoints(c)
+
+
+def test_shape_coordinates_round_trip_numeric_and_symbolic():
+    import casadi as ca
+    c = DEFAULT_SETPOINTS.as_array()
+    x = shape_from_setpoints(c)
+    assert x[2] == pytest.approx(c[2] / math.sqrt(math.sin(c[0]) * c[1]))
+    assert setpoints_from_shape(x) == pytest.approx(c, abs=1e-15)
+    sym = ca.SX.sym("c", 3)
+    f = ca.Function("f", [sym], [setpoints_from_shape(shape_from_setpoints(sym)), shape_from_setpoints(sym)])
+    back, xs = f(c)
+    assert np.asarray(back).ravel() == pytest.approx(c, abs=1e-15)
+    assert np.asarray(xs).ravel() == pytest.approx(x, abs=1e-15)
+    box = ShapeBox()
+    assert box.to_unit(box.from_unit([0.2, 0.5, 0.9])) == pytest.approx([0.2, 0.5, 0.9])
+    assert box.from_unit([0, 0, 0]) == pytest.approx(setpoints_from_shape(box.lower()))
+
+
+@pytest.mark.parametrize("bounds", [{"aspect": (0.2, 0.1)}, {"theta_0": (0.5, math.radians(95))},
+                                    {"A_phi": (math.nan, 1.0)}])
+def test_shape_box_rejects_bad_bounds(bounds):
+    with pytest.raises(SetpointError, match="ShapeBox"):
+        ShapeBox(**bounds)
 
 
 @pytest.mark.parametrize("bad, words", [

@@ -2,7 +2,7 @@
 
 * :func:`model_only` — fly the model-only optimum, no adaptation.
 * :func:`finite_difference_ascent` — model-free: forward-difference gradient of the measured tension, projected
-  gradient step in box-normalized coordinates, step length halved when the measured tension drops.
+  gradient step in box-normalized shape coordinates, step length halved when the measured tension drops.
 * :func:`nelder_mead_plant` — SciPy Nelder–Mead directly on measured experiments (box-normalized, clipped).
 
 Each returns a :class:`BaselineRun`: the candidate setpoints it would recommend after each experiment and the
@@ -17,7 +17,7 @@ import numpy as np
 
 from .experiment import ExperimentSpec, PlantFlight
 from .oracle import plant_performance
-from .path import SetpointBox
+from .path import ShapeBox
 from .plant import PlantConfig
 
 __all__ = ["BaselineRun", "model_only", "finite_difference_ascent", "nelder_mead_plant", "time_to_target"]
@@ -29,17 +29,25 @@ class _Budget(Exception):
 
 @dataclass
 class BaselineRun:
-    """Candidates (rad, (n, 3)) and the flight time (s) at which each became the recommendation."""
+    """Candidates (rad, (n, 3)) and the flight time (s) at which each became the recommendation.
+
+    ``stop``: optional ``callable(c) -> bool`` judging each new candidate; once it returns True the run ends
+    early (``stopped``), e.g. when a candidate reaches the target on the deterministic plant.
+    """
 
     name: str
     candidates: list = field(default_factory=list)
     times: list = field(default_factory=list)
     flight_time: float = 0.0
     experiments: int = 0
+    stop: object = None
+    stopped: bool = False
 
     def add(self, c, t) -> None:
         self.candidates.append(np.asarray(c, dtype=float).copy())
         self.times.append(float(t))
+        if self.stop is not None and not self.stopped and self.stop(self.candidates[-1]):
+            self.stopped = True
 
 
 def model_only(c0, budget: float) -> BaselineRun:
@@ -55,25 +63,23 @@ def _flight(config, seed, spec, c0):
 
 
 def finite_difference_ascent(config: PlantConfig | None, seed: int, c0, budget: float,
-                             spec: ExperimentSpec | None = None, box: SetpointBox | None = None,
-                             fd_step: float = 0.5, step: float = 0.3) -> BaselineRun:
+                             spec: ExperimentSpec | None = None, box: ShapeBox | None = None,
+                             fd_step: float = 0.5, step: float = 0.3, stop=None) -> BaselineRun:
     """Model-free projected gradient ascent on the measured (normalized) tension.
 
     Per iteration: nominal + 3 forward perturbations (``fd_step`` of the box width); move ``step`` (box
     widths) along the normalized gradient; halve ``step`` when the nominal tension dropped. Altitude:
     the measured constraint ``g`` > 0 adds its gradient (penalty 5 kN/m).
     """
-    box = box or SetpointBox()
+    box = box or ShapeBox()
     spec = spec or ExperimentSpec(n_laps=4)
-    lo, hi = box.lower(), box.upper()
-    w = hi - lo
     fl = _flight(config, seed, spec, c0)
-    run = BaselineRun("FD ascent")
-    x = (np.asarray(c0, dtype=float) - lo) / w
-    run.add(lo + x * w, 0.0)
+    run = BaselineRun("FD ascent", stop=stop)
+    x = np.clip(box.to_unit(c0), 0.0, 1.0)
+    run.add(box.from_unit(x), 0.0)
     prev = -math.inf
-    while fl.t < budget:
-        f0 = fl.fly(lo + x * w)
+    while fl.t < budget and not run.stopped:
+        f0 = fl.fly(box.from_unit(x))
         merit0 = -f0.cost - 5.0 * max(0.0, f0.constraint)
         if merit0 < prev:
             step *= 0.5
@@ -83,40 +89,38 @@ def finite_difference_ascent(config: PlantConfig | None, seed: int, c0, budget: 
             xp = x.copy()
             h = fd_step if x[i] + fd_step <= 1.0 else -fd_step
             xp[i] = np.clip(x[i] + h, 0.0, 1.0)
-            fp = fl.fly(lo + xp * w)
+            fp = fl.fly(box.from_unit(xp))
             grad[i] = ((-fp.cost - 5.0 * max(0.0, fp.constraint)) - merit0) / (xp[i] - x[i])
         n = np.linalg.norm(grad)
         if n > 0:
             x = np.clip(x + step * grad / n, 0.0, 1.0)
-        run.add(lo + x * w, fl.t)
+        run.add(box.from_unit(x), fl.t)
     run.flight_time, run.experiments = fl.t, len(fl.experiments)
     return run
 
 
 def nelder_mead_plant(config: PlantConfig | None, seed: int, c0, budget: float,
-                      spec: ExperimentSpec | None = None, box: SetpointBox | None = None,
-                      simplex: float = 0.3) -> BaselineRun:
+                      spec: ExperimentSpec | None = None, box: ShapeBox | None = None,
+                      simplex: float = 0.3, stop=None) -> BaselineRun:
     """SciPy Nelder–Mead on measured experiments; the candidate is the best measured point so far."""
     from scipy.optimize import minimize
-    box = box or SetpointBox()
+    box = box or ShapeBox()
     spec = spec or ExperimentSpec(n_laps=4)
-    lo, hi = box.lower(), box.upper()
-    w = hi - lo
     fl = _flight(config, seed, spec, c0)
-    run = BaselineRun("Nelder-Mead")
-    x0 = (np.asarray(c0, dtype=float) - lo) / w
+    run = BaselineRun("Nelder-Mead", stop=stop)
+    x0 = np.clip(box.to_unit(c0), 0.0, 1.0)
     run.add(c0, 0.0)
     best = [math.inf]
 
     def f(x):
-        if fl.t >= budget:
+        if fl.t >= budget or run.stopped:
             raise _Budget
         xc = np.clip(x, 0.0, 1.0)
-        out = fl.fly(lo + xc * w)
+        out = fl.fly(box.from_unit(xc))
         val = out.cost + 5.0 * max(0.0, out.constraint)
         if val < best[0]:
             best[0] = val
-            run.add(lo + xc * w, fl.t)
+            run.add(box.from_unit(xc), fl.t)
         return val + 1e3 * float(np.sum((x - xc) ** 2))
 
     sim = np.vstack([x0] + [np.clip(x0 + (simplex if x0[i] < 0.5 else -simplex) * np.eye(3)[i], 0, 1)

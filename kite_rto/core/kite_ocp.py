@@ -38,6 +38,7 @@ import numpy as np
 
 from .model import KiteModel
 from .params import KiteParams, check_range
+from .path import setpoints_from_shape, shape_from_setpoints
 from .projection import project_samples
 
 try:
@@ -159,7 +160,8 @@ def _softmin(z, h_ref: float, s: float):
 
 
 def kite_model_problem(params: KiteParams | None = None, settings: KiteOCPSettings | None = None,
-                       c_lb=None, c_ub=None, c_guess=None, name: str = "kite_lap") -> KiteModelProblem:
+                       c_lb=None, c_ub=None, c_guess=None, name: str = "kite_lap",
+                       shape: bool = False) -> KiteModelProblem:
     """Build the periodic-lap OCP of the open-loop kite as a :class:`ModelProblem` (all fields symbolic SX).
 
     Args:
@@ -168,7 +170,11 @@ def kite_model_problem(params: KiteParams | None = None, settings: KiteOCPSettin
         c_lb, c_ub: the plant's safe setpoint box (theta_0, A_phi, A_theta), rad (``DEFAULT_C_LB/UB``).
         c_guess: setpoints whose figure-eight seeds ``u0`` (:data:`DEFAULT_C_GUESS`).
         name: label of the problem.
+        shape: outputs in shape coordinates ``y = (theta_0, A_phi, aspect)`` (:func:`shape_from_setpoints`)
+            instead of setpoints; ``c_lb``, ``c_ub`` and ``c_guess`` are then shape coordinates too (and required).
     """
+    if shape and (c_lb is None or c_ub is None or c_guess is None):
+        raise ValueError("kite_model_problem(shape=True): give c_lb, c_ub and c_guess in shape coordinates")
     params = params or KiteParams()
     settings = settings or KiteOCPSettings()
     c_lb = DEFAULT_C_LB if c_lb is None else np.asarray(c_lb, dtype=float)
@@ -195,8 +201,9 @@ def kite_model_problem(params: KiteParams | None = None, settings: KiteOCPSettin
         u=u, cost=-mean_tension / settings.cost_unit + settings.delta_rate_weight * ca.sumsqr(
             delta - ca.vertcat(delta[1:], delta[0])),
         constraints=(settings.h_min - z_soft) / settings.constraint_unit,
-        outputs=project_samples(theta, phi), lbu=lbu, ubu=ubu,
-        u0=path_guess(params, settings, c_guess), c_lb=c_lb, c_ub=c_ub,
+        outputs=shape_from_setpoints(project_samples(theta, phi)) if shape else project_samples(theta, phi),
+        lbu=lbu, ubu=ubu, c_lb=c_lb, c_ub=c_ub,
+        u0=path_guess(params, settings, setpoints_from_shape(c_guess) if shape else c_guess),
         equalities=equalities, inner_constraints=None, name=name, params=params, settings=settings,
         mean_tension=mean_tension, node_altitudes=z)
 

@@ -2,8 +2,10 @@
 
 * :class:`KiteRTOSettings` — experiment, gradient and GMA tuning for the kite (defaults measured, see below).
 * :func:`make_kite_gma` — a :class:`~kite_rto.gma.GMA` on :func:`~kite_rto.core.kite_ocp.kite_model_problem`
-  whose setpoint box is the path controller's :class:`~kite_rto.core.path.SetpointBox` (every point of it
-  is trackable), started at the model-only optimum.
+  in shape coordinates ``x = (theta_0, A_phi, aspect)`` over a :class:`~kite_rto.core.path.ShapeBox` (every
+  point of it is trackable; the trackable set is a curved band in setpoints), started at the model-only
+  optimum. GMA's records hold ``x``; everything this module hands out (``RTOSession.c``, iterates,
+  experiment logs) is setpoints ``c = (theta_0, A_phi, A_theta)``, rad (:func:`setpoints_from_shape`).
 * :class:`RTOSession` — the per-sample logic shared by the pure runner and the ROS optimizer node:
   ``session.start(t)`` gives the first setpoints, then ``session.on_measurement(m)`` for every plant
   measurement returns new setpoints to apply (or None). It feeds an
@@ -32,7 +34,7 @@ from .controller import ControllerSettings
 from .experiment import ExperimentEvaluator, ExperimentOutcome, ExperimentSpec
 from .kite_ocp import KiteOCPSettings, kite_model_problem
 from .params import KiteParams
-from .path import SetpointBox, Setpoints
+from .path import Setpoints, ShapeBox, setpoints_from_shape, shape_from_setpoints
 from .plant import PlantConfig
 
 __all__ = ["KiteRTOSettings", "kite_problem", "make_kite_gma", "RTOSession", "ExperimentLog", "RTOResult",
@@ -47,24 +49,26 @@ class KiteRTOSettings:
 
     Attributes:
         experiment: :class:`ExperimentSpec` of every experiment (nominal and perturbations).
-        box: setpoint box of the optimizer (rad); the controller's default box, whose points all track.
+        box: the optimizer's :class:`ShapeBox` (shape coordinates); every point of it tracks.
         gradient: ``"forward"`` / ``"central"`` finite differences, or ``"least_squares"`` over past points
             with forward differences as fallback.
-        fd_step: finite-difference step per setpoint, relative to the box width, in (0, 1].
+        fd_step: finite-difference step per shape coordinate, relative to the box width, in (0, 1].
         filter_gain: GMA input filter K, in (0, 1].
+        modifier_filter: GMA's first-order filter on the gradient modifiers, in (0, 1] (1 = none).
         trust_radius: initial GMA trust radius (relative to the box width), > 0.
         trust_radius_min: lower limit of the adapted trust radius (relative), > 0.
         backoff: constraint back-off, m (>= 0).
         max_repeats: times a crashed/invalid experiment is repeated before it is submitted as measured
             (NaN-free) or, with no lap at all, the run stops (>= 0).
-        c0: initial setpoints (rad); None = the model-only optimum.
+        c0: initial setpoints (theta_0, A_phi, A_theta), rad; None = the model-only optimum.
     """
 
     experiment: ExperimentSpec = field(default_factory=lambda: ExperimentSpec(n_laps=4))
-    box: SetpointBox = field(default_factory=SetpointBox)
+    box: ShapeBox = field(default_factory=ShapeBox)
     gradient: str = "forward"
     fd_step: tuple = (0.5, 0.5, 0.5)
     filter_gain: float = 0.6
+    modifier_filter: float = 1.0
     trust_radius: float = 0.4
     trust_radius_min: float = 0.05
     backoff: float = 2.0
@@ -78,8 +82,9 @@ class KiteRTOSettings:
         steps = np.atleast_1d(np.asarray(self.fd_step, dtype=float))
         if steps.size not in (1, 3) or not np.all((steps > 0) & (steps <= 1)):
             raise ValueError(f"{n}.fd_step = {self.fd_step!r}: expected 1 or 3 values in (0, 1]")
-        if not 0 < self.filter_gain <= 1:
-            raise ValueError(f"{n}.filter_gain = {self.filter_gain!r}: expected a value in (0, 1]")
+        for f in ("filter_gain", "modifier_filter"):
+            if not 0 < getattr(self, f) <= 1:
+                raise ValueError(f"{n}.{f} = {getattr(self, f)!r}: expected a value in (0, 1]")
         for f in ("trust_radius", "trust_radius_min"):
             if not getattr(self, f) > 0:
                 raise ValueError(f"{n}.{f} = {getattr(self, f)!r}: expected a value > 0")
@@ -91,7 +96,8 @@ class KiteRTOSettings:
     def gma_settings(self) -> GMASettings:
         """The :class:`GMASettings` these settings stand for (settle/averaging hints in s and laps)."""
         sp = self.experiment
-        return GMASettings(filter_gain=self.filter_gain, trust_radius=self.trust_radius,
+        return GMASettings(filter_gain=self.filter_gain, modifier_filter=self.modifier_filter,
+                           trust_radius=self.trust_radius,
                            trust_radius_min=min(self.trust_radius_min, self.trust_radius),
                            backoff=self.backoff, settle_time=sp.settle_time, averaging=float(sp.n_laps),
                            tol_c=1e-3)
@@ -106,30 +112,33 @@ class KiteRTOSettings:
 
 
 @lru_cache(maxsize=4)
-def kite_problem(box: SetpointBox = SetpointBox(), model_params: KiteParams = KiteParams(),
+def kite_problem(box: ShapeBox = ShapeBox(), model_params: KiteParams = KiteParams(),
                  ocp: KiteOCPSettings = KiteOCPSettings()):
-    """The kite lap OCP on the optimizer's setpoint box (cached per process: building it takes seconds)."""
+    """The kite lap OCP in shape coordinates on ``box`` (cached per process: building it takes seconds)."""
     return kite_model_problem(model_params, ocp, c_lb=box.lower(), c_ub=box.upper(),
-                              c_guess=0.5 * (box.lower() + box.upper()), name="kite_lap")
+                              c_guess=0.5 * (box.lower() + box.upper()), name="kite_lap", shape=True)
 
 
 @lru_cache(maxsize=4)
 def _model_optimum_cached(box, model_params, ocp) -> tuple:
     from .kite_ocp_solve import solve_model_optimum
     sol = solve_model_optimum(kite_problem(box, model_params, ocp))
-    return tuple(np.clip(sol.c, box.lower(), box.upper()).tolist()), sol.mean_tension_kn, sol.min_altitude
+    x = np.clip(sol.c, box.lower(), box.upper())
+    return tuple(setpoints_from_shape(x).tolist()), sol.mean_tension_kn, sol.min_altitude
 
 
-def model_only_optimum(box: SetpointBox = SetpointBox(), model_params: KiteParams = KiteParams(),
+def model_only_optimum(box: ShapeBox = ShapeBox(), model_params: KiteParams = KiteParams(),
                        ocp: KiteOCPSettings = KiteOCPSettings()) -> tuple:
-    """``(c rad (3,), model mean tension kN, model min altitude m)`` of the model's own optimum in ``box``."""
+    """``(c setpoints rad (3,), model mean tension kN, model min altitude m)`` of the model's own optimum in
+    ``box``."""
     c, t, z = _model_optimum_cached(box, model_params, ocp)
     return np.array(c), t, z
 
 
 def make_kite_gma(settings: KiteRTOSettings | None = None, model_params: KiteParams | None = None,
                   ocp: KiteOCPSettings | None = None, c0=None, history=None) -> GMA:
-    """A :class:`GMA` on the kite lap model, started at ``c0`` (default: settings.c0, else the model optimum).
+    """A :class:`GMA` on the kite lap model in shape coordinates, started at setpoints ``c0`` (rad; default:
+    settings.c0, else the model optimum).
 
     ``ocp.h_min`` must equal ``settings.experiment.h_min`` (the plant's and the model's constraint agree).
     """
@@ -142,8 +151,8 @@ def make_kite_gma(settings: KiteRTOSettings | None = None, model_params: KitePar
     problem = kite_problem(settings.box, model_params, ocp)
     if c0 is None:
         c0 = settings.c0 if settings.c0 is not None else model_only_optimum(settings.box, model_params, ocp)[0]
-    c0 = np.clip(np.asarray(c0, dtype=float), settings.box.lower(), settings.box.upper())
-    return GMA(problem, settings.gma_settings(), settings.gradient_estimator(), c0=c0, history=history)
+    x0 = np.clip(shape_from_setpoints(c0), settings.box.lower(), settings.box.upper())
+    return GMA(problem, settings.gma_settings(), settings.gradient_estimator(), c0=x0, history=history)
 
 
 @dataclass
@@ -190,14 +199,14 @@ class RTOSession:
 
     @property
     def c(self) -> np.ndarray | None:
-        """Setpoints of the experiment in progress (rad)."""
-        return None if self.request is None else np.asarray(self.request.c, dtype=float)
+        """Setpoints ``(theta_0, A_phi, A_theta)`` of the experiment in progress (rad)."""
+        return None if self.request is None else setpoints_from_shape(self.request.c)
 
     def start(self, t: float) -> np.ndarray:
         """Begin (or resume) with GMA's next request at time ``t`` s; returns the setpoints to apply."""
         self.request = self.gma.next_request()
         self.repeats = 0
-        self.evaluator.start(t, self.request.c)
+        self.evaluator.start(t, self.c)
         return self.c
 
     def on_measurement(self, m) -> np.ndarray | None:
@@ -212,7 +221,7 @@ class RTOSession:
             return None
         if not out.valid and self.repeats < self.max_repeats:
             self.repeats += 1
-            self.evaluator.start(m.t, self.request.c)
+            self.evaluator.start(m.t, self.c)
             return self.c
         if not out.valid:
             self.failed = f"experiment {self.request.request_id} invalid after {self.repeats} repeats"
@@ -231,7 +240,7 @@ class RTOResult:
     Attributes:
         records: every :class:`IterationRecord`.
         experiments: every :class:`ExperimentLog`.
-        iterates: c_0, c_1, ..., c_K (rad), shape (K + 1, 3); c_{k+1} = records[k].c_next.
+        iterates: setpoints c_0, c_1, ..., c_K (rad), shape (K + 1, 3); c_{k+1} = setpoints_from_shape(records[k].c_next).
         iterate_times: flight time (s) at which each iterate became available (0 for c_0).
         flight_time: total simulated flight time, s.
         crashes: plant crashes during the run.
@@ -262,14 +271,15 @@ def run_kite_rto(plant_config: PlantConfig | None = None, seed: int = 0, n_iter:
         n_iter: GMA iterations to complete.
         settings: :class:`KiteRTOSettings`.
         gma: a fresh GMA to use (default :func:`make_kite_gma` of ``settings``).
-        controller_settings: :class:`ControllerSettings` (``box`` is replaced by ``settings.box``).
+        controller_settings: :class:`ControllerSettings` (``box`` is replaced by ``settings.box``'s
+            bounding setpoint box).
         max_flight_time: stop after this much simulated flight, s.
     """
     settings = settings or KiteRTOSettings()
     gma = gma or make_kite_gma(settings)
-    cs = replace(controller_settings or ControllerSettings(), box=settings.box)
+    cs = replace(controller_settings or ControllerSettings(), box=settings.box.setpoint_box())
     session = RTOSession(gma, settings.experiment, settings.max_repeats)
-    c_first = Setpoints.from_array(np.asarray(gma.next_request().c, dtype=float))
+    c_first = Setpoints.from_array(setpoints_from_shape(gma.next_request().c))
     plant, controller = make_closed_loop(c_first, plant_config, seed=seed, settings=cs)
     m = plant.measure()
     crashes0 = m.crashes
@@ -280,8 +290,8 @@ def run_kite_rto(plant_config: PlantConfig | None = None, seed: int = 0, n_iter:
             controller.set_setpoints(Setpoints.from_array(new))
         m = plant.step(controller.command(m))
         new = session.on_measurement(m)
-    iterates = [np.asarray(gma.history.c0 if k0 == 0 else gma.records[k0 - 1].c_next, dtype=float)]
-    iterates += [np.asarray(r.c_next, dtype=float) for r in gma.records[k0:]]
+    iterates = [setpoints_from_shape(gma.history.c0 if k0 == 0 else gma.records[k0 - 1].c_next)]
+    iterates += [setpoints_from_shape(r.c_next) for r in gma.records[k0:]]
     return RTOResult(records=list(gma.records[k0:]), experiments=session.experiments,
                      iterates=np.array(iterates), iterate_times=np.r_[0.0, session.record_times],
                      flight_time=float(m.t), crashes=m.crashes - crashes0, seed=seed, failed=session.failed,

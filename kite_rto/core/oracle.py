@@ -1,8 +1,9 @@
 """The true plant optimum ("oracle"): direct optimization of the deterministic closed loop over the setpoints.
 
 :func:`plant_performance` flies setpoints ``c`` on the plant with turbulence and noise off, from launch, and
-averages whole laps after the transient. :func:`find_oracle` maximizes the mean tension over the setpoint box
-subject to ``min altitude >= h_min``: a coarse grid, then Nelder–Mead (box-normalized coordinates, clipped,
+averages whole laps after the transient. :func:`find_oracle` maximizes the mean tension over the optimizer's
+:class:`~kite_rto.core.path.ShapeBox` subject to ``min altitude >= h_min``: a coarse grid, then Nelder–Mead
+(box-normalized shape coordinates, clipped,
 with a penalty on altitude violation) from the best grid points. Results are cached in
 ``runs/oracle_<hash>.json`` keyed by the plant configuration, the box and the evaluation settings.
 """
@@ -18,7 +19,7 @@ from dataclasses import dataclass, asdict
 import numpy as np
 
 from .experiment import ExperimentSpec, PlantFlight
-from .path import SetpointBox
+from .path import ShapeBox
 from .plant import PlantConfig
 
 __all__ = ["OracleResult", "plant_performance", "find_oracle", "DEFAULT_CACHE_DIR"]
@@ -56,19 +57,19 @@ class OracleResult:
     key: str
 
 
-def _key(config: PlantConfig, box: SetpointBox, h_min: float, spec: ExperimentSpec, grid: int) -> str:
+def _key(config: PlantConfig, box: ShapeBox, h_min: float, spec: ExperimentSpec, grid: int) -> str:
     text = repr((config.without_disturbances(), box, h_min, spec, grid, "v1"))
     return hashlib.sha1(text.encode()).hexdigest()[:12]
 
 
-def find_oracle(config: PlantConfig | None = None, box: SetpointBox | None = None, h_min: float = 100.0,
+def find_oracle(config: PlantConfig | None = None, box: ShapeBox | None = None, h_min: float = 100.0,
                 spec: ExperimentSpec = _SPEC, grid: int = 3, starts: int = 2, maxfev: int = 40,
                 penalty: float = 5.0, cache_dir: str | None = DEFAULT_CACHE_DIR) -> OracleResult:
     """Maximize the deterministic plant's mean tension over ``box`` s.t. min altitude >= ``h_min`` (m).
 
     Args:
         config: plant configuration (disturbances are switched off here).
-        box: :class:`SetpointBox` (the controller's default).
+        box: :class:`ShapeBox` searched (the optimizer's default); the result is in setpoints.
         grid: points per setpoint of the initial grid (>= 2).
         starts: Nelder–Mead runs, from the best feasible grid points.
         maxfev: evaluations per Nelder–Mead run.
@@ -77,18 +78,17 @@ def find_oracle(config: PlantConfig | None = None, box: SetpointBox | None = Non
     """
     from scipy.optimize import minimize
     config = config or PlantConfig()
-    box = box or SetpointBox()
+    box = box or ShapeBox()
     key = _key(config, box, h_min, spec, grid)
     path = None if cache_dir is None else os.path.join(cache_dir, f"oracle_{key}.json")
     if path and os.path.exists(path):
         with open(path) as f:
             return OracleResult(**json.load(f))
-    lo, hi = box.lower(), box.upper()
     evals = []
 
     def f(x):
         xc = np.clip(x, 0.0, 1.0)
-        c = lo + xc * (hi - lo)
+        c = box.from_unit(xc)
         t, z = plant_performance(config, c, spec)
         evals.append((t, z, c))
         return -t + penalty * max(0.0, h_min - z) + 1e3 * float(np.sum((x - xc) ** 2))

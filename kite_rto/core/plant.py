@@ -92,8 +92,9 @@ class PlantConfig:
         check_range(n, "launch_state[psi]", psi, -math.pi, math.pi)
 
     def without_disturbances(self) -> "PlantConfig":
-        """The same kite with no turbulence and no measurement noise."""
-        return replace(self, turbulence=replace(self.turbulence, enabled=False, anemometer_noise=0.0),
+        """The same kite with no turbulence and no measurement noise (the turbulence settings are reset to
+        their defaults, which have no effect when disabled, so equal kites compare equal)."""
+        return replace(self, turbulence=TurbulenceSettings(enabled=False, anemometer_noise=0.0),
                        noise=NoiseSettings(0.0, 0.0, 0.0))
 
 

@@ -6,7 +6,9 @@ gust ``g`` is first-order filtered white noise (an Ornstein-Uhlenbeck process) w
 with the exact discretization ``g+ = a g + sigma sqrt(1 - a^2) n``, ``a = exp(-update_period / tau)``.
 
 The anemometer at ``z_ref`` sees a gust correlated with the kite's (coefficient ``anemometer_correlation``) plus
-its own white measurement noise.
+its own white measurement noise. The default correlation 1 is SPEC §2's model (one gust process on ``w_ref``, which
+the anemometer at ``z_ref`` measures); a correlation below 1 models an anemometer that sees a partly different
+gust (a stress case: at 0.95 the normalized 4-lap mean tension scatters ~15x more, see the README).
 """
 from __future__ import annotations
 
@@ -37,7 +39,7 @@ class TurbulenceSettings:
     length_scale: float = 100.0
     intensity: float = 0.14
     update_period: float = 0.15
-    anemometer_correlation: float = 0.95
+    anemometer_correlation: float = 1.0
     anemometer_noise: float = 0.1
 
     def __post_init__(self):

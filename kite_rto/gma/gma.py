@@ -255,6 +255,13 @@ class GMA:
         eps = nominal.constraints - model.g
         lam = est.cost - model.grad_phi
         mu = est.constraints - model.jac_g
+        b = s.modifier_filter
+        prev = next((r for r in reversed(self.history.iterations)
+                     if np.all(np.isfinite(r.lam)) and np.all(np.isfinite(r.mu))), None)
+        if b < 1.0 and prev is not None and np.all(np.isfinite(lam)) and np.all(np.isfinite(mu)):
+            lam = (1.0 - b) * prev.lam + b * lam
+            mu = (1.0 - b) * prev.mu.reshape(mu.shape) + b * mu
+            notes.append(f"modifiers filtered (b = {b:g})")
         radius_abs = self._radius * self._width
         u_star, mod_cost, mod_status = np.full(pr.n_u, np.nan), np.nan, "not solved"
         backoff = self._backoff.copy()

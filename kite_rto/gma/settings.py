@@ -53,6 +53,10 @@ class GMASettings:
     Attributes:
         filter_gain: input filter ``K`` in ``c_{k+1} = c_k + K (c*_{k+1} - c_k)``; scalar or one gain per
             setpoint, each in ``(0, 1]``. 1 = no filtering.
+        modifier_filter: first-order filter ``b`` on the gradient modifiers,
+            ``lambda_k = (1 - b) lambda_{k-1} + b lambda_k^measured`` (and ``mu`` likewise), in ``(0, 1]``;
+            1 = no filtering. Averages noisy plant-gradient estimates over iterations (Marchetti et al. 2009);
+            ``eps_k`` is never filtered.
         trust_radius: initial trust-region half-width of the box ``|y(u) - c_k| <= Delta`` imposed in the
             modified problem, relative to the setpoint box width; ``> 0``, ``inf`` disables the trust region.
         trust_adapt: adapt the trust radius per setpoint: shrink it by ``trust_shrink`` when the step in that
@@ -91,6 +95,7 @@ class GMASettings:
     """
 
     filter_gain: Scalar = 0.5
+    modifier_filter: float = 1.0
     trust_radius: Scalar = 0.25
     trust_adapt: bool = True
     trust_shrink: float = 0.5
@@ -111,6 +116,7 @@ class GMASettings:
 
     def __post_init__(self):
         _check("filter_gain", self.filter_gain, 0.0, 1.0, low_open=True)
+        _check("modifier_filter", self.modifier_filter, 0.0, 1.0, low_open=True)
         _check("trust_radius", self.trust_radius, 0.0, None, low_open=True, inf_ok=True)
         if not isinstance(self.trust_adapt, bool):
             raise ValueError(f"GMASettings.trust_adapt={self.trust_adapt!r}: expected True or False")

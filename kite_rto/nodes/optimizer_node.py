@@ -21,12 +21,10 @@ from std_msgs.msg import UInt32
 
 from ..core.kite_rto import KiteRTOSettings, RTOSession, make_kite_gma
 from ..core.params import KiteParams, ParameterError
-from ..core.path import Setpoints, SetpointError, validate_setpoints
+from ..core.path import Setpoints, SetpointError, ShapeBox, setpoints_from_shape, validate_setpoints
 from ..gma import HistoryStore
 from .common import (LATCHED, RELIABLE_10, ParamSpec, declare_params, request_exit, run_node,
                      stamp_to_ns)
-from .controller_node import PARAMS as CONTROLLER_PARAMS
-from .controller_node import _box
 from .sample_join import POSITION_MAX, TENSION_MAX, WIND_MAX, RejectLog, SampleJoin, state_values
 from .topics import CRASHES, POSITION, SETPOINTS, STATE, STATUS, TENSION, WIND
 
@@ -51,11 +49,19 @@ PARAMS = (
     ParamSpec("normalize", _E.normalize, "normalize lap tension by the measured reference wind"),
     ParamSpec("h_min", _E.h_min, "minimum altitude (the constraint)", 0.0, 1000.0, unit="m"),
     ParamSpec("gradient", _S.gradient, "plant gradient estimation", choices=("forward", "central", "least_squares")),
-    ParamSpec("fd_step", float(_S.fd_step[0]), "finite-difference step", 0.01, 1.0, unit="fraction of the box width"),
+    ParamSpec("fd_step", float(_S.fd_step[0]), "finite-difference step", 0.01, 1.0,
+              unit="fraction of the shape box width"),
     ParamSpec("filter_gain", _S.filter_gain, "GMA input filter K", 0.01, 1.0, unit="dimensionless"),
+    ParamSpec("modifier_filter", _S.modifier_filter, "GMA filter on the gradient modifiers (1 = none)", 0.01, 1.0,
+              unit="dimensionless"),
     ParamSpec("trust_radius", _S.trust_radius, "initial trust radius (not below GMA's minimum trust radius)",
               _S.trust_radius_min, 10.0, unit="fraction of the box width"),
-    *[p for p in CONTROLLER_PARAMS if p.name.startswith("box_")],
+    ParamSpec("box_theta_0_deg", [math.degrees(v) for v in _S.box.theta_0], "optimizer's theta_0 range [low, high]",
+              1.0, 89.0, unit="deg"),
+    ParamSpec("box_A_phi_deg", [math.degrees(v) for v in _S.box.A_phi], "optimizer's A_phi range [low, high]",
+              0.1, 89.0, unit="deg"),
+    ParamSpec("box_aspect", list(_S.box.aspect), "optimizer's aspect range [low, high], aspect = A_theta / "
+              "sqrt(sin theta_0 A_phi); every point of the box must be trackable", 0.01, 2.0, unit="dimensionless"),
 )
 
 
@@ -67,6 +73,26 @@ def _cross_check(v: dict) -> None:
     if v["exit_when_done"] and v["n_iter"] == 0:
         raise ParameterError(f"parameters exit_when_done = {v['exit_when_done']!r}, n_iter = 0: expected n_iter > 0 "
                              "when exit_when_done is true (n_iter = 0 never ends)")
+
+
+def _shape_box(v: dict) -> ShapeBox:
+    """The optimizer's :class:`ShapeBox` from the box parameters; every point of a 3x3x3 grid must track."""
+    pairs = {}
+    for name, key, scale in (("theta_0", "box_theta_0_deg", math.pi / 180), ("A_phi", "box_A_phi_deg", math.pi / 180),
+                             ("aspect", "box_aspect", 1.0)):
+        lo, hi = v[key]
+        if not lo < hi:
+            raise ParameterError(f"parameter {key} = {list(v[key])!r}: expected [low, high] with low < high")
+        pairs[name] = (lo * scale, hi * scale)
+    try:
+        box = ShapeBox(**pairs)
+        for x in box.grid(3):
+            validate_setpoints(setpoints_from_shape(x), box.setpoint_box(), KiteParams())
+    except SetpointError as err:
+        raise ParameterError(f"parameters box_theta_0_deg = {list(v['box_theta_0_deg'])}, box_A_phi_deg = "
+                             f"{list(v['box_A_phi_deg'])}, box_aspect = {list(v['box_aspect'])}: expected a box "
+                             f"whose every point is a trackable figure-eight: {err}") from None
+    return box
 
 
 class OptimizerNode(Node):
@@ -82,8 +108,8 @@ class OptimizerNode(Node):
         try:
             spec = replace(_E, n_laps=v["n_laps"], settle_laps=v["settle_laps"], settle_time=v["settle_time"],
                            max_duration=v["max_duration"], normalize=v["normalize"], h_min=v["h_min"])
-            self.settings = replace(_S, experiment=spec, box=_box(v), gradient=v["gradient"],
-                                    fd_step=(v["fd_step"],) * 3, filter_gain=v["filter_gain"],
+            self.settings = replace(_S, experiment=spec, box=_shape_box(v), gradient=v["gradient"],
+                                    fd_step=(v["fd_step"],) * 3, filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
                                     trust_radius=v["trust_radius"])
         except ValueError as err:
             raise ParameterError(str(err)) from None
@@ -114,7 +140,7 @@ class OptimizerNode(Node):
         if history is not None:
             self.get_logger().info(f"resumed from {v['db']}: {len(history.experiments)} experiments, "
                                    f"{len(history.iterations)} iterations")
-        self.publish_setpoints(first.c)
+        self.publish_setpoints(setpoints_from_shape(first.c))
         self.get_logger().info(f"optimizer up: first experiment {first.request_id}")
 
     def apply_params(self, changes: dict) -> None:
@@ -226,7 +252,7 @@ class OptimizerNode(Node):
 
     def finish(self) -> None:
         rec = self.gma.records[-1]
-        self.publish_setpoints(rec.c_next)
+        self.publish_setpoints(setpoints_from_shape(rec.c_next))
         self.done = True
         self.phase = "done"
         self.publish_status()
@@ -236,8 +262,8 @@ class OptimizerNode(Node):
 
     # ----------------------------------------------------------------- output
     def publish_setpoints(self, c) -> None:
-        """Publish ``c`` (rad) after checking it against the safe box and the controller's turn limit."""
-        box = self.settings.box
+        """Publish setpoints ``c`` (rad) after checking them against the safe box and the turn limit."""
+        box = self.settings.box.setpoint_box()
         try:
             validate_setpoints(np.asarray(c, dtype=float), box, KiteParams())
         except SetpointError as err:
@@ -276,8 +302,9 @@ class OptimizerNode(Node):
         self._reject_log(key, text)
 
     @staticmethod
-    def _deg(c) -> str:
-        return "(" + ", ".join(f"{math.degrees(x):.2f}" for x in np.asarray(c, dtype=float)) + ") deg"
+    def _deg(x) -> str:
+        """Setpoints in degrees of GMA's shape coordinates ``x``."""
+        return "(" + ", ".join(f"{math.degrees(v):.2f}" for v in setpoints_from_shape(x)) + ") deg"
 
     @staticmethod
     def _vec(v) -> str:

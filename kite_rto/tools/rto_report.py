@@ -23,7 +23,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..core.oracle import find_oracle, plant_performance
-from ..core.path import FigureEightPath, SetpointBox, Setpoints
+from ..core.path import FigureEightPath, Setpoints, ShapeBox, setpoints_from_shape, shape_from_setpoints
 from ..core.plant import PlantConfig
 from ..gma import HistoryStore
 
@@ -35,9 +35,9 @@ def _deg(c) -> str:
 
 
 def judge_iterates(history, config: PlantConfig, oracle, h_min: float = 100.0) -> list[dict]:
-    """One row per iterate c_0 .. c_K: measured values (if any) and the deterministic-plant judgement
-    (``oracle`` None: no judgement, the judged fields are None)."""
-    iterates = [np.asarray(history.c0)] + [np.asarray(r.c_next) for r in history.iterations]
+    """One row per iterate c_0 .. c_K (GMA's shape coordinates, judged as setpoints): measured values (if any)
+    and the deterministic-plant judgement (``oracle`` None: no judgement, the judged fields are None)."""
+    iterates = [setpoints_from_shape(history.c0)] + [setpoints_from_shape(r.c_next) for r in history.iterations]
     rows = []
     for k, c in enumerate(iterates):
         t_kn, z = plant_performance(config, c) if oracle is not None else (None, None)
@@ -52,14 +52,14 @@ def judge_iterates(history, config: PlantConfig, oracle, h_min: float = 100.0) -
     return rows
 
 
-def write_report(history, out: Path, config: PlantConfig | None = None, box: SetpointBox | None = None,
+def write_report(history, out: Path, config: PlantConfig | None = None, box: ShapeBox | None = None,
                  samples=None, laps=None, extra: dict | None = None, judge: bool = True) -> dict:
     """Print the per-iteration table, save figures and ``summary.json`` in ``out``; return the summary.
 
     ``judge=False``: no oracle and no deterministic-plant judgement (measured values only).
     """
     config = config or PlantConfig()
-    box = box or SetpointBox()
+    box = box or ShapeBox()
     oracle = None
     if judge:
         print("\ncomputing the oracle (direct optimization of the deterministic plant; cached in runs/) ...",
@@ -300,7 +300,8 @@ def history_from_mcap(data: SimpleNamespace):
                 g = float(kv["measured_constraint_m"])
             except (KeyError, ValueError):
                 cost, g = math.nan, math.nan
-            iterations[n] = SimpleNamespace(k=n - 1, c_next=c_next, cost=cost, constraints=np.array([g]),
+            iterations[n] = SimpleNamespace(k=n - 1, c_next=shape_from_setpoints(c_next), cost=cost,
+                                            constraints=np.array([g]),
                                             decision=kv.get("decision", ""))
         exp = kv.get("experiment")
         if exp and (not experiments or experiments[-1][0] != exp):
@@ -330,7 +331,9 @@ def history_from_mcap(data: SimpleNamespace):
         exps.append((SimpleNamespace(request_id=exp_id, purpose=purpose, iteration=it),
                      SimpleNamespace(extra={"t_end": None if math.isnan(t_end) else t_end})))
     ordered = [iterations[n] for n in sorted(iterations)]
-    return SimpleNamespace(c0=np.asarray(c0, dtype=float), iterations=ordered, experiments=exps)
+    # in GMA's shape coordinates, like an optimizer's History (the recording has setpoints)
+    return SimpleNamespace(c0=shape_from_setpoints(np.asarray(c0, dtype=float)), iterations=ordered,
+                           experiments=exps)
 
 
 def report_from_mcap(path, out: Path, judge: bool = True) -> int:
