@@ -56,9 +56,9 @@ PARAMS = (
               unit="dimensionless"),
     ParamSpec("trust_radius", _S.trust_radius, "initial trust radius (not below GMA's minimum trust radius)",
               _S.trust_radius_min, 10.0, unit="fraction of the box width"),
-    ParamSpec("box_theta_0_deg", [math.degrees(v) for v in _S.box.theta_0], "optimizer's theta_0 range [low, high]",
+    ParamSpec("box_theta_0_deg", [round(math.degrees(v), 9) for v in _S.box.theta_0], "optimizer's theta_0 range [low, high]",
               1.0, 89.0, unit="deg"),
-    ParamSpec("box_A_phi_deg", [math.degrees(v) for v in _S.box.A_phi], "optimizer's A_phi range [low, high]",
+    ParamSpec("box_A_phi_deg", [round(math.degrees(v), 9) for v in _S.box.A_phi], "optimizer's A_phi range [low, high]",
               0.1, 89.0, unit="deg"),
     ParamSpec("box_aspect", list(_S.box.aspect), "optimizer's aspect range [low, high], aspect = A_theta / "
               "sqrt(sin theta_0 A_phi); every point of the box must be trackable", 0.01, 2.0, unit="dimensionless"),
