@@ -14,7 +14,7 @@ import pytest
 
 from kite_rto.tools.graph import node_command
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.faults]
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "kite_rto.yaml"
 LOG_ENV = "KITE_RTO_FAULT_LOG"

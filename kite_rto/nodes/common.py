@@ -27,12 +27,17 @@ from sensor_msgs.msg import JointState
 
 from ..core.params import ParameterError
 
-__all__ = ["RELIABLE_10", "LATCHED", "ParamSpec", "READ_ONLY", "declare_params", "stamp_to_ns", "ns_to_stamp",
+__all__ = ["RELIABLE_10", "MEASUREMENTS", "LATCHED", "ParamSpec", "READ_ONLY", "declare_params", "stamp_to_ns", "ns_to_stamp",
            "finite_floats", "run_node", "request_exit", "MessageTemplate", "cdr_serialize", "joint_state_from_raw"]
 
 RELIABLE_10 = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.VOLATILE)
 """Measurements and steering: reliable, depth 10 (lockstep must not lose a sample)."""
+MEASUREMENTS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.VOLATILE)
+"""Publishers of per-sample topics (measurements, steering): reliable with a deep history (20 s of samples at
+50 Hz), so that a subscriber stalled by CPU load (a recorder, a monitor) catches up instead of losing samples.
+Subscribers stay at ``RELIABLE_10``: the depth is not part of QoS compatibility."""
 LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 """Setpoints: a late joiner gets the current value."""

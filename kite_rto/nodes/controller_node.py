@@ -23,7 +23,7 @@ from ..core.laps import LapDetector
 from ..core.params import KiteParams, ParameterError
 from ..core.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, Setpoints, SetpointError
 from ..core.plant import shared_model
-from .common import (LATCHED, RELIABLE_10, ParamSpec, declare_params, run_node,
+from .common import (LATCHED, MEASUREMENTS, RELIABLE_10, ParamSpec, declare_params, run_node,
                      stamp_to_ns)
 from .sample_join import MAX_STAMP_GAP_NS, POSITION_MAX, TENSION_MAX, WIND_MAX, RejectLog, state_values
 from .topics import LAPS, POSITION, REFERENCE_PATH, SETPOINTS, STATE, STEERING, TENSION, WIND
@@ -101,7 +101,7 @@ class ControllerNode(Node):
         except SetpointError as err:
             raise ParameterError(f"initial setpoints (theta_0_deg, A_phi_deg, A_theta_deg): {err}") from None
         self.laps = LapDetector()
-        self.pub_steering = self.create_publisher(JointState, STEERING, RELIABLE_10)
+        self.pub_steering = self.create_publisher(JointState, STEERING, MEASUREMENTS)
         self.pub_path = self.create_publisher(Path, REFERENCE_PATH, LATCHED)
         self.pub_laps = self.create_publisher(JointState, LAPS, RELIABLE_10)
         self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10)

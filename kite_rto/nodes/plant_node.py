@@ -22,7 +22,7 @@ from std_msgs.msg import UInt32
 from ..core.params import KiteParams
 from ..core.plant import PLANT_PARAMS, KitePlant, NoiseSettings, PlantConfig
 from ..core.wind import TurbulenceSettings
-from .common import (LATCHED, RELIABLE_10, MessageTemplate, ParamSpec, declare_params, finite_floats, joint_state_from_raw,
+from .common import (LATCHED, MEASUREMENTS, RELIABLE_10, MessageTemplate, ParamSpec, declare_params, finite_floats, joint_state_from_raw,
                      request_exit, run_node, stamp_to_ns)
 from .sample_join import RejectLog
 from .topics import CLOCK, CRASHES, POSITION, STATE, STEERING, TENSION, WIND
@@ -129,11 +129,11 @@ class PlantNode(Node):
         self._dt_ns = round(self.p["dt"] * 1e9)
         self._lockstep = self.p["mode"] == "lockstep"
         self._end_step = round(self.p["duration"] / self.p["dt"]) if self.p["duration"] > 0 else None
-        self.pub_clock = self.create_publisher(ClockMsg, CLOCK, 10)
-        self.pub_state = self.create_publisher(JointState, STATE, RELIABLE_10)
-        self.pub_position = self.create_publisher(PointStamped, POSITION, RELIABLE_10)
-        self.pub_tension = self.create_publisher(WrenchStamped, TENSION, RELIABLE_10)
-        self.pub_wind = self.create_publisher(Vector3Stamped, WIND, RELIABLE_10)
+        self.pub_clock = self.create_publisher(ClockMsg, CLOCK, MEASUREMENTS)
+        self.pub_state = self.create_publisher(JointState, STATE, MEASUREMENTS)
+        self.pub_position = self.create_publisher(PointStamped, POSITION, MEASUREMENTS)
+        self.pub_tension = self.create_publisher(WrenchStamped, TENSION, MEASUREMENTS)
+        self.pub_wind = self.create_publisher(Vector3Stamped, WIND, MEASUREMENTS)
         self.pub_crashes = self.create_publisher(UInt32, CRASHES, LATCHED)
         self.pub_crashes.publish(UInt32(data=0))
         self.create_subscription(JointState, STEERING, self.steering_callback, RELIABLE_10, raw=True)

@@ -32,18 +32,18 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
 from ..nodes import topics as T
-from ..nodes.common import LATCHED, RELIABLE_10
+from ..nodes.common import LATCHED, MEASUREMENTS, RELIABLE_10
 
 __all__ = ["TOPICS", "topic_type", "type_name", "message_definition", "generated_definition", "qos_yaml",
            "McapRecording", "RecordNode", "main"]
 
 TOPICS: dict = {
-    T.CLOCK: (Clock, RELIABLE_10),
-    T.STATE: (JointState, RELIABLE_10),
-    T.POSITION: (PointStamped, RELIABLE_10),
-    T.TENSION: (WrenchStamped, RELIABLE_10),
-    T.WIND: (Vector3Stamped, RELIABLE_10),
-    T.STEERING: (JointState, RELIABLE_10),
+    T.CLOCK: (Clock, MEASUREMENTS),
+    T.STATE: (JointState, MEASUREMENTS),
+    T.POSITION: (PointStamped, MEASUREMENTS),
+    T.TENSION: (WrenchStamped, MEASUREMENTS),
+    T.WIND: (Vector3Stamped, MEASUREMENTS),
+    T.STEERING: (JointState, MEASUREMENTS),
     T.REFERENCE_PATH: (Path, LATCHED),
     T.LAPS: (JointState, RELIABLE_10),
     T.CRASHES: (UInt32, LATCHED),
