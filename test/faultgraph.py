@@ -25,6 +25,7 @@ from kite_rto.core.params import KiteParams
 from kite_rto.core.path import SetpointBox, SetpointError, validate_setpoints
 from kite_rto.nodes.common import LATCHED, RELIABLE_10, stamp_to_ns
 from kite_rto.tools.graph import node_command
+from rosutil import Probe
 
 QUIET = {"turbulence": False, "anemometer_noise": 0.0, "noise_angle_deg": 0.0, "noise_rate": 0.0,
          "noise_tension": 0.0}
@@ -193,7 +194,7 @@ class Watch:
         return sum(unsafe(c, _BOX_TOL) for c in self.paths)
 
 
-class DomainProbe:
+class DomainProbe(Probe):
     """An rclpy node in another ROS domain (its own context), spun on demand like ``rosutil.Probe``."""
 
     def __init__(self, domain_id: int, name: str = "probe_b"):
@@ -203,17 +204,8 @@ class DomainProbe:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
 
-    def spin_until(self, predicate, timeout: float) -> bool:
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if predicate():
-                return True
-            self.executor.spin_once(timeout_sec=0.01)
-        return predicate()
-
     def close(self):
-        self.executor.remove_node(self.node)
-        self.node.destroy_node()
+        super().close()
         rclpy.try_shutdown(context=self.context)
 
 

@@ -228,9 +228,9 @@ def test_kite_crash_discards_and_repeats_the_experiment_pure(request):
                    "fault_relay --dive-at)") as row:
         gma = make_kite_gma(SETTINGS)
         session = RTOSession(gma, SETTINGS.experiment, SETTINGS.max_repeats)
-        c0 = Setpoints.from_array(np.asarray(gma.next_request().c, dtype=float))
+        c0 = Setpoints.from_array(setpoints_from_shape(gma.next_request().c))   # GMA works in shape coordinates
         plant, controller = make_closed_loop(c0, PlantConfig().without_disturbances(), seed=0,
-                                             settings=replace(ControllerSettings(), box=SETTINGS.box))
+                                             settings=replace(ControllerSettings(), box=SETTINGS.box.setpoint_box()))
         m = plant.measure()
         new = session.start(m.t)
         crash_t = None

@@ -279,7 +279,7 @@ def test_controller_parameters_over_dds_and_params_files(probe, ros_env, tmp_pat
                             start_new_session=True)
     try:
         assert get_params(probe, "controller", "k_psi", "blend_time", "dt", "box_A_phi_deg") == \
-            [2.5, 5.0, 0.02, [42.0, 50.0]]
+            [2.5, 5.0, 0.02, [42.0, 62.0]]
         assert_rejected(set_params(probe, "controller", k_psi=500.0)[0], "parameter k_psi = 500.0",
                         "[0.01, 100] 1/s")
         assert_rejected(set_params(probe, "controller", delta_max=0.5)[0], "parameter delta_max = 0.5", READ_ONLY)

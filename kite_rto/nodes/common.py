@@ -340,6 +340,11 @@ def run_node(factory, args=None, *, events: bool = False) -> int:
         code = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RuntimeError:
+        if rclpy.ok():
+            raise
+        # Ctrl-C shut rclpy down while a call into it was in flight: rclpy's C++ layer then raises a RuntimeError
+        # (pybind11 "Unable to convert call argument ...") instead of ExternalShutdownException. A clean stop.
     except SystemExit as exc:
         code = exc.code if isinstance(exc.code, int) else 0
     finally:

@@ -19,6 +19,7 @@ import sys
 import time
 from pathlib import Path
 
+from . import graph
 from .graph import NodeProcess, isolated_ros_env, stop_all
 
 
@@ -164,8 +165,10 @@ def fly(args, env, out: Path, progress: Progress) -> dict:
         while time.monotonic() < deadline:                  # the last lap message
             rclpy.spin_once(rec, timeout_sec=0.05)
         code = plant.proc.returncode
-    except KeyboardInterrupt:
-        interrupted, code = True, 130
+    except (KeyboardInterrupt, RuntimeError) as exc:
+        if not isinstance(exc, KeyboardInterrupt) and not graph.SIGNALLED:
+            raise
+        interrupted, code = True, 130             # (a signal inside an rclpy call can surface as RuntimeError)
     finally:
         progress.clear()
         stop_all(list(reversed(procs)))
@@ -202,12 +205,15 @@ def report(args, res, out: Path) -> int:
 
 
 def _terminate(signum, frame):
+    graph.SIGNALLED = True
     raise KeyboardInterrupt
 
 
 def main(argv=None) -> int:
     args = parse_args(argv)
     signal.signal(signal.SIGTERM, _terminate)         # a kill or a closing session: the same clean stop
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:   # not when the shell ignores it (cmd &)
+        signal.signal(signal.SIGINT, _terminate)
     env = isolated_ros_env()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -225,6 +231,10 @@ def main(argv=None) -> int:
         print("\ninterrupted", flush=True)
         return 130
     except RuntimeError as exc:
+        if graph.SIGNALLED:
+            progress.clear()
+            print("\ninterrupted", flush=True)
+            return 130
         print(f"kite_rto demo: {exc}", file=sys.stderr)
         return 1
 

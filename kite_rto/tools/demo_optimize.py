@@ -6,6 +6,7 @@ import re
 import time
 from pathlib import Path
 
+from . import graph
 from .graph import NodeProcess, stop_all
 
 _PROGRESS = re.compile(r"\[optimizer\]: (experiment|iteration|done|resumed|refusing|failed)(.*)")
@@ -126,8 +127,10 @@ def optimize(args, env, out: Path, progress) -> int:
         code = opt.proc.returncode if opt.proc.poll() is not None else 1
         if code != 0:
             print(f"the optimizer exited with code {code}; see {out / 'nodes.log'}")
-    except KeyboardInterrupt:
-        interrupted, code = True, 130
+    except (KeyboardInterrupt, RuntimeError) as exc:
+        if not isinstance(exc, KeyboardInterrupt) and not graph.SIGNALLED:
+            raise
+        interrupted, code = True, 130             # (a signal inside an rclpy call can surface as RuntimeError)
     finally:
         progress.clear()
         stop_all(list(reversed(procs)))

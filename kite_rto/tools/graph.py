@@ -12,6 +12,9 @@ import time
 __all__ = ["NodeProcess", "isolated_ros_env", "node_command", "start_node", "start_process", "stop_node",
            "stop_all"]
 
+SIGNALLED = False
+"""Set by the demo's SIGINT/SIGTERM handler: an error raised inside rclpy after it is part of the stop, not a bug."""
+
 MODULES = {"plant": "kite_rto.nodes.plant_node", "controller": "kite_rto.nodes.controller_node",
            "optimizer": "kite_rto.nodes.optimizer_node", "echo_pilot": "kite_rto.nodes.echo_pilot"}
 _PR_SET_PDEATHSIG = 1
