@@ -380,14 +380,15 @@ def test_bad_optimizer_inputs_keep_the_experiments_clean(probe, ros_env, request
         row.unsafe_setpoints = watch.unsafe_published() + watch.unsafe_applied()
         row.outcome = (f"{sum(sent.values())} bad messages; {counts['experiments']} experiments stored "
                        f"({len(set(ids))} distinct), setpoints equal to the fault-free pure runner within {dc:.1e} "
-                       f"rad, costs within {100 * rel:.2f} % (a clean ROS run: about 1 %); "
+                       f"rad, costs within {100 * rel:.2f} % (a clean ROS run: 1-2 %); "
                        f"{sum(warned.values())} value warnings + {discarded} stale/future-stamp warnings (throttled)")
         assert code == 0, opt.text()[-3000:]
         assert counts == {"experiments": 4, "iterations": 1}
-        # A clean ROS run agrees with the pure runner to about 1 % (setpoint changes reach the controller a few
-        # samples late, later while the optimizer is busy rejecting); bad data that got through shows as >10 %
-        # (13 % measured with the nodes before the stamp checks).
-        assert dc < 1e-9 and rel < 3e-2
+        # A clean ROS run agrees with the pure runner to 1-2 % (setpoint changes reach the controller a few
+        # samples late, later while the optimizer is busy rejecting: 3.9 % seen under this flood with the
+        # shape-coordinate box's larger setpoint steps); bad data that got through shows as >10 % (13 %
+        # measured with the nodes before the stamp checks).
+        assert dc < 1e-9 and rel < 6e-2
         assert sent_all == sum(sent.values()) and min(sent.values()) >= 50, sent
         assert all(warned.values()) and discarded >= 1, warned
         assert sum(warned.values()) + discarded < sum(sent.values()) / 10
