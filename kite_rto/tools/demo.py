@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 from . import graph
-from .graph import NodeProcess, isolated_ros_env, stop_all
+from .graph import NodeProcess, close_graph, isolated_ros_env, stopped_by_signal
 
 
 def parse_args(argv=None):
@@ -166,15 +166,12 @@ def fly(args, env, out: Path, progress: Progress) -> dict:
             rclpy.spin_once(rec, timeout_sec=0.05)
         code = plant.proc.returncode
     except (KeyboardInterrupt, RuntimeError) as exc:
-        if not isinstance(exc, KeyboardInterrupt) and not graph.SIGNALLED:
+        if not stopped_by_signal(exc):
             raise
-        interrupted, code = True, 130             # (a signal inside an rclpy call can surface as RuntimeError)
+        interrupted, code = True, 130
     finally:
         progress.clear()
-        stop_all(list(reversed(procs)))
-        log.close()
-        rec.destroy_node()
-        rclpy.try_shutdown()
+        close_graph(procs, rec, log)
     if interrupted:
         print(f"\ninterrupted: every node stopped (node output in {out / 'nodes.log'})", flush=True)
     recorder_summary(procs)
@@ -231,7 +228,7 @@ def main(argv=None) -> int:
         print("\ninterrupted", flush=True)
         return 130
     except RuntimeError as exc:
-        if graph.SIGNALLED:
+        if stopped_by_signal(exc):
             progress.clear()
             print("\ninterrupted", flush=True)
             return 130

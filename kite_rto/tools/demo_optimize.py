@@ -6,8 +6,7 @@ import re
 import time
 from pathlib import Path
 
-from . import graph
-from .graph import NodeProcess, stop_all
+from .graph import NodeProcess, close_graph, stopped_by_signal
 
 _PROGRESS = re.compile(r"\[optimizer\]: (experiment|iteration|done|resumed|refusing|failed)(.*)")
 
@@ -128,15 +127,12 @@ def optimize(args, env, out: Path, progress) -> int:
         if code != 0:
             print(f"the optimizer exited with code {code}; see {out / 'nodes.log'}")
     except (KeyboardInterrupt, RuntimeError) as exc:
-        if not isinstance(exc, KeyboardInterrupt) and not graph.SIGNALLED:
+        if not stopped_by_signal(exc):
             raise
-        interrupted, code = True, 130             # (a signal inside an rclpy call can surface as RuntimeError)
+        interrupted, code = True, 130
     finally:
         progress.clear()
-        stop_all(list(reversed(procs)))
-        log.close()
-        rec.destroy_node()
-        rclpy.try_shutdown()
+        close_graph(procs, rec, log)
     if interrupted:
         print(f"\ninterrupted: every node stopped. The optimizer's database {db} keeps every finished experiment; "
               f"--resume continues the run", flush=True)

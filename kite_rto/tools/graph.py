@@ -10,7 +10,7 @@ import threading
 import time
 
 __all__ = ["NodeProcess", "isolated_ros_env", "node_command", "start_node", "start_process", "stop_node",
-           "stop_all"]
+           "stop_all", "close_graph", "stopped_by_signal"]
 
 SIGNALLED = False
 """Set by the demo's SIGINT/SIGTERM handler: an error raised inside rclpy after it is part of the stop, not a bug."""
@@ -146,3 +146,19 @@ def stop_all(procs, timeout: float = 10.0) -> None:
     finally:
         if previous is not None:
             signal.signal(signal.SIGINT, previous)
+
+
+def stopped_by_signal(exc: BaseException) -> bool:
+    """True for Ctrl-C (``KeyboardInterrupt``) and for the ``RuntimeError`` rclpy's C++ layer raises when SIGINT or
+    SIGTERM arrived inside one of its calls (:data:`SIGNALLED` set): a stop, not a failure."""
+    return isinstance(exc, KeyboardInterrupt) or (isinstance(exc, RuntimeError) and SIGNALLED)
+
+
+def close_graph(procs, node, log) -> None:
+    """Stop the node processes (last started first), close their shared log, destroy the in-process observer
+    ``node`` and shut rclpy down."""
+    import rclpy
+    stop_all(list(reversed(procs)))
+    log.close()
+    node.destroy_node()
+    rclpy.try_shutdown()
