@@ -256,9 +256,9 @@ class GMA:
         lam = est.cost - model.grad_phi
         mu = est.constraints - model.jac_g
         b = s.modifier_filter
-        prev = next((r for r in reversed(self.history.iterations)
-                     if np.all(np.isfinite(r.lam)) and np.all(np.isfinite(r.mu))), None)
-        if b < 1.0 and prev is not None and np.all(np.isfinite(lam)) and np.all(np.isfinite(mu)):
+        prev = None if b == 1.0 else next((r for r in reversed(self.history.iterations)
+                                           if np.all(np.isfinite(r.lam)) and np.all(np.isfinite(r.mu))), None)
+        if prev is not None and np.all(np.isfinite(lam)) and np.all(np.isfinite(mu)):
             lam = (1.0 - b) * prev.lam + b * lam
             mu = (1.0 - b) * prev.mu.reshape(mu.shape) + b * mu
             notes.append(f"modifiers filtered (b = {b:g})")
