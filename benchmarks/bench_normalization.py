@@ -6,13 +6,14 @@ the lap-mean tension raw and normalized (``C_T w_nominal^2``), the 4-lap experim
 difference dT/dA_phi of consecutive experiments. Std over all seeds and pairs; the deterministic plant gives
 the true values.
 
-Usage: ``python benchmarks/bench_normalization.py [--seeds 4] [--pairs 3] [--dA 4]``
+Usage: ``python benchmarks/bench_normalization.py [--seeds 4] [--pairs 3] [--dA 4] [--anemometer-correlation 0.95]``
 """
 from __future__ import annotations
 
 import argparse
 import math
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -29,7 +30,13 @@ def main(argv=None) -> int:
     ap.add_argument("--pairs", type=int, default=3)
     ap.add_argument("--dA", type=float, default=4.0, help="A_phi difference, deg")
     ap.add_argument("--laps", type=int, default=4)
+    ap.add_argument("--anemometer-correlation", type=float, default=None,
+                    help="plant anemometer gust correlation (default: PlantConfig's, 1)")
     args = ap.parse_args(argv)
+    config = PlantConfig()
+    if args.anemometer_correlation is not None:
+        config = replace(config, turbulence=replace(config.turbulence,
+                                                    anemometer_correlation=args.anemometer_correlation))
     ca = np.radians([30.0, 44.0, 7.0])
     cb = ca + np.radians([0.0, args.dA, 0.0])
     spec = ExperimentSpec(n_laps=args.laps, normalize=False)
@@ -38,7 +45,7 @@ def main(argv=None) -> int:
     exp = {"raw": [], "norm": []}
     grad = {"raw": [], "norm": []}
     for seed in range(args.seeds):
-        fl = PlantFlight(PlantConfig(), seed, spec)
+        fl = PlantFlight(config, seed, spec)
         for _ in range(args.pairs):
             vals = []
             for c in (ca, cb):
@@ -54,7 +61,8 @@ def main(argv=None) -> int:
     tb, _ = plant_performance(None, cb)
     true_grad = (tb - ta) / args.dA
     print(f"bench_normalization: {args.seeds} seeds x {args.pairs} pairs, c_a = (30, 44, 7) deg, "
-          f"dA_phi = {args.dA:g} deg, {args.laps} laps/experiment, {time.perf_counter() - t0:.0f} s wall")
+          f"dA_phi = {args.dA:g} deg, {args.laps} laps/experiment, anemometer correlation "
+          f"{config.turbulence.anemometer_correlation:g}, {time.perf_counter() - t0:.0f} s wall")
     print(f"deterministic plant: T(c_a) = {ta:.1f} kN, forward-difference dT/dA_phi = {true_grad:.2f} kN/deg")
     head = f"{'quantity':38} {'raw':>10} {'normalized':>11} {'ratio':>6}"
     print(head)

@@ -8,7 +8,7 @@ with the exact discretization ``g+ = a g + sigma sqrt(1 - a^2) n``, ``a = exp(-u
 The anemometer at ``z_ref`` sees a gust correlated with the kite's (coefficient ``anemometer_correlation``) plus
 its own white measurement noise. The default correlation 1 is SPEC §2's model (one gust process on ``w_ref``, which
 the anemometer at ``z_ref`` measures); a correlation below 1 models an anemometer that sees a partly different
-gust (a stress case: at 0.95 the normalized 4-lap mean tension scatters ~15x more, see the README).
+gust (a stress case: at 0.95 the normalized 4-lap mean tension scatters ~18x more, ``bench_normalization.py``).
 """
 from __future__ import annotations
 
