@@ -29,14 +29,16 @@ def setpoint_msg(values):
     return JointState(name=["theta_0", "A_phi", "A_theta"], position=[float(v) for v in values])
 
 
-def test_dds_lockstep_matches_pure_runner(probe, ros_env):
+@pytest.mark.parametrize("sync", [False, True], ids=["plain", "sync-without-optimizer"])
+def test_dds_lockstep_matches_pure_runner(probe, ros_env, sync):
+    """Bit for bit like the pure closed loop, also with sync_optimizer and no optimizer in the graph."""
     steering = {}
     probe.node.create_subscription(JointState, "/kite/steering",
                                    lambda m: steering.setdefault(stamp_to_ns(m.header.stamp), m.position[0]),
                                    DEEP)
     laps = []
     probe.node.create_subscription(JointState, "/kite/laps", laps.append, RELIABLE_10)
-    ctrl = start_node("controller", {}, ros_env)
+    ctrl = start_node("controller", {"sync_optimizer": sync}, ros_env)
     # the probe must hear the controller before the plant starts the loop
     assert probe.spin_until(lambda: probe.node.count_publishers("/kite/steering") > 0, 60.0)
     probe.spin_until(lambda: False, 1.0)
@@ -58,6 +60,8 @@ def test_dds_lockstep_matches_pure_runner(probe, ros_env):
     np.testing.assert_array_equal(got, ref.delta)                  # bit for bit
     assert laps and list(laps[0].name)[:3] == ["lap", "lap_time", "mean_tension"], out
     assert laps[0].position[2] > 1e5                                # mean tension, N
+    # with sync_optimizer and no optimizer in the graph, the first sample waits 1 s, then it flies on its own
+    assert out.count("no optimizer in the graph") == (1 if sync else 0), out
 
 
 def test_setpoints_late_joiner_rejection_and_path(probe, ros_env):

@@ -228,6 +228,9 @@ class KitePlant:
         self.applied_delta = 0.0
         self.t = 0.0
         self.k = 0
+        # Time of sample k is k * dt_ns * 1e-9 s: the same float a ROS node computes from the sample's stamp (integer
+        # ns), so that the nodes and the pure runner see identical times.
+        self._dt_ns = round(self.dt * 1e9)
         self.crashes = 0
         self._noise: list = []
         self._ni = 0
@@ -261,7 +264,7 @@ class KitePlant:
             change = mc
         self.applied_delta += change
         self.k += 1
-        t = self.t = self.k * self.dt
+        t = self.t = self.k * self._dt_ns * 1e-9
         turb = self.turbulence
         if t >= turb._next_update - 1e-12:
             turb.advance(t)

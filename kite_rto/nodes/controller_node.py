@@ -3,6 +3,8 @@
 Subscribes the plant's measurements and ``/rto/setpoints`` (reliable + transient-local: a late controller still
 gets the current setpoints); answers every ``/kite/state`` sample on ``/kite/steering`` with the sample's stamp
 (the lockstep handshake); publishes the reference path (nav_msgs/Path, for RViz/Foxglove) and per-lap statistics.
+With ``sync_optimizer:=true`` (lockstep) it answers a sample only after the optimizer's ``/rto/sync`` message for it
+and takes the setpoints from there, so a setpoint change takes effect at the same sample as in the pure runner.
 All computation is :class:`kite_rto.core.controller.PathController` and :class:`kite_rto.core.laps.LapDetector`.
 """
 from __future__ import annotations
@@ -15,6 +17,7 @@ from types import SimpleNamespace
 import numpy as np
 from geometry_msgs.msg import PointStamped, PoseStamped, Vector3Stamped, WrenchStamped
 from nav_msgs.msg import Path
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
@@ -26,7 +29,7 @@ from ..core.plant import shared_model
 from .common import (LATCHED, MEASUREMENTS, RELIABLE_10, ParamSpec, declare_params, run_node,
                      stamp_to_ns)
 from .sample_join import MAX_STAMP_GAP_NS, POSITION_MAX, TENSION_MAX, WIND_MAX, RejectLog, state_values
-from .topics import LAPS, POSITION, REFERENCE_PATH, SETPOINTS, STATE, STEERING, TENSION, WIND
+from .topics import LAPS, POSITION, REFERENCE_PATH, SETPOINTS, STATE, STEERING, SYNC, SYNC_NAMES, TENSION, WIND
 
 __all__ = ["ControllerNode", "PARAMS", "LAP_FIELDS", "main"]
 
@@ -53,6 +56,12 @@ PARAMS = (
     ParamSpec("k_psi", _C.k_psi, "orientation-error gain", 0.01, 100.0, unit="1/s", runtime=True),
     ParamSpec("k_i", _C.k_i, "integral gain: turn rate per integrated cross-track error (rad/s per rad s)",
               0.0, 100.0, unit="1/s^2", runtime=True),
+    ParamSpec("sync_optimizer", False, "lockstep: answer each sample only after the optimizer has processed it "
+              "(/rto/sync) and take the setpoints from there, so the graph flies exactly the pure runner's sequence; "
+              "without an optimizer publishing /rto/sync it answers at once"),
+    ParamSpec("sync_timeout", 10.0, "wall time to wait for /rto/sync before answering with the current setpoints "
+              "(then unsynchronized until the optimizer is back); longer than a GMA iteration's solve", 0.1, 3600.0,
+              unit="s", runtime=True),
     ParamSpec("blend_time", _C.blend_time, "duration of the blend to new setpoints (0: switch at once)", 0.0, 600.0,
               unit="s", runtime=True),
     ParamSpec("E", KiteParams.E, "model glide ratio (nominal)", 0.5, 30.0, unit="dimensionless"),
@@ -62,6 +71,8 @@ PARAMS = (
     ParamSpec("z_ref", KiteParams.z_ref, "anemometer height (reference height of the model's wind profile)", 0.5,
               200.0, unit="m"),
 )
+SYNC_ABSENT = 1.0
+"""Wall s a sample waits for /rto/sync before the controller asks whether an optimizer is in the graph at all."""
 SETPOINTS_GRACE, SETPOINTS_WAIT = 1.0, 3.0
 """Wall s after start-up during which the controller waits for /rto/setpoints before steering (see
 :meth:`ControllerNode._await_setpoints`): always for the first, while an optimizer is known for the second."""
@@ -119,6 +130,16 @@ class ControllerNode(Node):
         self._setpoints_in = False        # accepted /rto/setpoints yet (see _await_setpoints)
         self._t_up = time.monotonic()
         self._reject_log = RejectLog(self.get_logger())
+        self._setpoints_msg = None        # last valid /rto/setpoints values (rad); applied at once unless synchronized
+        self._sync = v["sync_optimizer"]
+        self._sync_timeout = v["sync_timeout"]
+        self._syncs = {}                  # /rto/sync entries by stamp (ns): (setpoints rad, updates)
+        self._sync_held = None            # (stamp, stamp msg, measurement, position, wall time): waits for /rto/sync
+        self._sync_lost = False           # timed out: answer at once until a /rto/sync message arrives again
+        self._sync_updates = None         # `updates` of the last applied /rto/sync
+        if self._sync:
+            self.create_subscription(JointState, SYNC, self.sync_callback, MEASUREMENTS)
+            self.create_timer(0.05, self._sync_watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.publish_path()
         self.get_logger().info(f"controller up: setpoints {self._fmt(c0)}")
 
@@ -127,6 +148,10 @@ class ControllerNode(Node):
 
         Every later PathController (plant restart, first setpoints) is built with the new settings too.
         """
+        if "sync_timeout" in changes:
+            self._sync_timeout = changes.pop("sync_timeout")
+            if not changes:
+                return
         try:
             settings = replace(self.settings, **changes)          # validated (ControllerSettings.__post_init__)
         except ValueError as err:
@@ -192,6 +217,12 @@ class ControllerNode(Node):
         if not self._setpoints_in and self._await_setpoints():
             return
         stamp = stamp_to_ns(msg.header.stamp)
+        if self._sync_held is not None:
+            held = self._sync_held[0]
+            if stamp == held:
+                return                              # re-published while the optimizer works on it
+            if held < stamp <= held + MAX_STAMP_GAP_NS:
+                self._release_unsynced("the next sample arrived first")
         held = (stamp, msg.header.stamp, pos, vel)
         last = self._last_stamp
         if self._jump is not None:
@@ -256,14 +287,20 @@ class ControllerNode(Node):
             self._wind = wind
         if self._winds:
             self._drop_winds(stamp)
-        t = stamp * 1e-9
-        m = SimpleNamespace(t=t, theta=pos[0], phi=pos[1], psi=pos[2], theta_dot=vel[0], phi_dot=vel[1],
+        m = SimpleNamespace(t=stamp * 1e-9, theta=pos[0], phi=pos[1], psi=pos[2], theta_dot=vel[0], phi_dot=vel[1],
                             psi_dot=vel[2], wind_ref=self._wind)
+        if self._sync and self._wait_for_sync(stamp):
+            self._sync_held = (stamp, stamp_msg, m, pos, time.monotonic())
+            return
+        self._steer(stamp, stamp_msg, m, pos)
+
+    def _steer(self, stamp: int, stamp_msg, m, pos) -> None:
+        """Answer the sample ``m`` (stamp in ns) with a steering command and update the lap statistics."""
         delta = self.controller.command(m)
         self._last_stamp, self._last_delta = stamp, delta
         self._answer(stamp_msg, delta)
-        lap = self.laps.update(t, pos[0], pos[1], self._tension, self._altitude,
-                               self.controller.status.cross_track, self._wind)
+        lap = self.laps.update(m.t, pos[0], pos[1], self._tension, self._altitude,
+                               self.controller.status.cross_track, m.wind_ref)
         if lap is not None:
             self.publish_lap(stamp_msg, lap)
 
@@ -338,6 +375,19 @@ class ControllerNode(Node):
             return
         values = dict(zip(names, msg.position))
         c = [values[n] for n in Setpoints.names()]
+        if self._synchronized():               # applied with the sample the optimizer decided them at
+            if not self._setpoints_in:
+                self.get_logger().info(f"new setpoints {self._fmt(Setpoints.from_array(c))} received; synchronized "
+                                       "with the optimizer: setpoints apply at the sample of its /rto/sync")
+            self._setpoints_msg = c
+            self._setpoints_in = True
+            return
+        if self._apply_setpoints(c):
+            self._setpoints_msg = c
+            self._setpoints_in = True
+
+    def _apply_setpoints(self, c) -> bool:
+        """Fly the setpoints ``c`` (rad): at once before the first sample, else blended; False if refused."""
         try:
             if self._last_stamp is None:       # nothing flown yet: start on the new path, no blend
                 self.controller = PathController(shared_model(), self.params, c, self.settings)
@@ -347,11 +397,85 @@ class ControllerNode(Node):
         except SetpointError as err:
             self._reject("setpoints value", f"rejected setpoints: {err}; keeping "
                                             f"{self._fmt(self.controller.setpoints)}")
-            return
+            return False
         self.laps.reset()
-        self._setpoints_in = True
         self.get_logger().info(f"new setpoints {self._fmt(accepted)}")
         self.publish_path()
+        return True
+
+    # ------------------------------------------------------- optimizer synchronization
+    # /rto/sync (sync_optimizer:=true): the optimizer publishes, after each sample it has processed, the setpoints
+    # in force and the count of its setpoint messages. A sample is answered once its sync message is in; a changed
+    # count applies the setpoints first (the pure runner's order: the optimizer sees sample k, then the controller
+    # answers it). A held sample is released unsynchronized after sync_timeout, or after SYNC_ABSENT s when no
+    # optimizer is in the graph (no publisher of /rto/sync or /rto/setpoints); from then on samples are answered at
+    # once and /rto/setpoints applies directly, until a sync message arrives again. The graph is never asked
+    # before a sample has waited: a late discovery must not let samples through unsynchronized.
+    def _synchronized(self) -> bool:
+        return self._sync and not self._sync_lost
+
+    def _optimizer_in_graph(self) -> bool:
+        return self.count_publishers(SYNC) > 0 or self.count_publishers(SETPOINTS) > 0
+
+    def _wait_for_sync(self, stamp: int) -> bool:
+        """True to hold the sample stamped ``stamp`` for its /rto/sync; applies the sync message if it is in."""
+        entry = self._syncs.pop(stamp, None)
+        if self._syncs:
+            for s in [s for s in self._syncs if s < stamp]:
+                del self._syncs[s]
+        if entry is not None:
+            self._apply_sync(*entry)
+            return False
+        return not self._sync_lost
+
+    def _apply_sync(self, c, updates: float) -> None:
+        if updates != self._sync_updates or c != self.controller.setpoints.as_array().tolist():
+            self._sync_updates = updates
+            self._apply_setpoints(c)
+
+    def sync_callback(self, msg: JointState) -> None:
+        vals = [float(x) for x in msg.position]
+        if list(msg.name) != SYNC_NAMES or len(vals) != 4 or not all(map(math.isfinite, vals)):
+            self._reject("sync", f"rejected sync message {(list(msg.name), vals)!r}: expected names {SYNC_NAMES} "
+                                 "with 4 finite values")
+            return
+        stamp = stamp_to_ns(msg.header.stamp)
+        if not self._stamp_near("sync", msg.header.stamp):
+            return
+        if self._sync_lost:
+            self._sync_lost = False
+            self.get_logger().info("/rto/sync is back: answering each sample after the optimizer again")
+        held = self._sync_held
+        if held is not None and held[0] == stamp:
+            self._sync_held = None
+            self._apply_sync(vals[:3], vals[3])
+            self._steer(*held[:4])
+        elif self._last_stamp is None or stamp > self._last_stamp:
+            if len(self._syncs) >= 64:
+                del self._syncs[next(iter(self._syncs))]
+            self._syncs[stamp] = (vals[:3], vals[3])
+
+    def _sync_watchdog(self) -> None:
+        held = self._sync_held
+        if held is None:
+            return
+        waited = time.monotonic() - held[4]
+        if waited > self._sync_timeout:
+            self._release_unsynced(f"no /rto/sync within sync_timeout = {self._sync_timeout:g} s")
+        elif waited > SYNC_ABSENT and not self._optimizer_in_graph():
+            self._release_unsynced(f"no optimizer in the graph after {SYNC_ABSENT:g} s")
+
+    def _release_unsynced(self, why: str) -> None:
+        """Answer the held sample with the latest /rto/setpoints; answer at once until /rto/sync is back."""
+        stamp, stamp_msg, m, pos, _ = self._sync_held
+        self._sync_held = None
+        self._sync_lost = True
+        self.get_logger().warning(f"sample at {stamp * 1e-9:.2f} s: {why}; steering unsynchronized until the "
+                                  "optimizer's /rto/sync is back")
+        c = self._setpoints_msg
+        if c is not None and c != self.controller.setpoints.as_array().tolist():
+            self._apply_setpoints(c)
+        self._steer(stamp, stamp_msg, m, pos)
 
     # ------------------------------------------------------------------- output
     def publish_path(self) -> None:

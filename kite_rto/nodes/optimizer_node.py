@@ -4,6 +4,11 @@ Drives :class:`kite_rto.core.kite_rto.RTOSession` (the same per-sample logic as 
 plant's measurements (joined by stamp), runs GMA's nominal and perturbation experiments, publishes
 ``/rto/setpoints`` (reliable + transient-local) and ``/rto/status`` (diagnostic_msgs), and writes every finished
 experiment and iteration to an SQLite database, from which a restarted optimizer resumes.
+
+After each plant sample it has processed it publishes ``/rto/sync`` (sensor_msgs/JointState stamped with the sample's
+time: the setpoints in force, rad, and ``updates``, the number of setpoint messages this optimizer has published). A
+controller started with ``sync_optimizer:=true`` answers a sample only after its sync message, so in lockstep a
+setpoint change takes effect at the same sample as in the pure runner and the graph flies the same sequence.
 """
 from __future__ import annotations
 
@@ -23,10 +28,10 @@ from ..core.kite_rto import KiteRTOSettings, RTOSession, make_kite_gma
 from ..core.params import KiteParams, ParameterError
 from ..core.path import Setpoints, SetpointError, ShapeBox, setpoints_from_shape, validate_setpoints
 from ..gma import HistoryStore
-from .common import (LATCHED, RELIABLE_10, ParamSpec, declare_params, request_exit, run_node,
-                     stamp_to_ns)
+from .common import (LATCHED, MEASUREMENTS, RELIABLE_10, ParamSpec, declare_params, ns_to_stamp, request_exit,
+                     run_node, stamp_to_ns)
 from .sample_join import POSITION_MAX, TENSION_MAX, WIND_MAX, RejectLog, SampleJoin, state_values
-from .topics import CRASHES, POSITION, SETPOINTS, STATE, STATUS, TENSION, WIND
+from .topics import CRASHES, POSITION, SETPOINTS, STATE, STATUS, SYNC, SYNC_NAMES, TENSION, WIND
 
 __all__ = ["OptimizerNode", "PARAMS", "main"]
 
@@ -124,6 +129,9 @@ class OptimizerNode(Node):
         self.join = SampleJoin()
         self.pub_setpoints = self.create_publisher(JointState, SETPOINTS, LATCHED)
         self.pub_status = self.create_publisher(DiagnosticArray, STATUS, RELIABLE_10)
+        self.pub_sync = self.create_publisher(JointState, SYNC, MEASUREMENTS)
+        self._c_published = None               # setpoints of the last /rto/setpoints message (rad)
+        self._updates = 0                      # /rto/setpoints messages published by this process
         self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10)
         self.create_subscription(WrenchStamped, TENSION, self.tension_callback, RELIABLE_10)
         self.create_subscription(PointStamped, POSITION, self.position_callback, RELIABLE_10)
@@ -208,6 +216,7 @@ class OptimizerNode(Node):
                                       "experiment starts again")
             self._started = False
         self.on_sample(m)
+        self.publish_sync(m.stamp)
 
     def on_sample(self, m) -> None:
         if self.done:
@@ -276,6 +285,18 @@ class OptimizerNode(Node):
         msg.name = Setpoints.names()
         msg.position = [float(x) for x in c]
         self.pub_setpoints.publish(msg)
+        self._c_published = list(msg.position)
+        self._updates += 1
+
+    def publish_sync(self, stamp: int) -> None:
+        """Tell a synchronized controller that the sample stamped ``stamp`` (ns) is processed (see the module doc)."""
+        if self._c_published is None:          # refused the first setpoints: nothing to fly
+            return
+        msg = JointState()
+        msg.header.stamp = ns_to_stamp(stamp)
+        msg.name = SYNC_NAMES
+        msg.position = [*self._c_published, float(self._updates)]
+        self.pub_sync.publish(msg)
 
     def publish_status(self) -> None:
         st = DiagnosticStatus(name="kite_rto/optimizer", hardware_id="kite_rto")

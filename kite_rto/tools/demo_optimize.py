@@ -100,7 +100,8 @@ def optimize(args, env, out: Path, progress) -> int:
             raise RuntimeError("the optimizer published no setpoints within 300 s")
         if not opt.alive():
             raise RuntimeError(f"the optimizer exited with code {opt.proc.returncode}; see {out / 'nodes.log'}")
-        ctrl = NodeProcess("controller", {}, log=log, env=env)
+        # Synchronized with the optimizer: the graph flies the same sequence as the pure runner (run_kite_rto).
+        ctrl = NodeProcess("controller", {"sync_optimizer": True}, log=log, env=env)
         procs.append(ctrl)
         _wait(lambda: any("new setpoints" in ln for ln in ctrl.lines) or not ctrl.alive(), rec, 120)
         plant = NodeProcess("plant", plant_params, log=log, env=env)

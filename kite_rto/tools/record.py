@@ -49,6 +49,7 @@ TOPICS: dict = {
     T.CRASHES: (UInt32, LATCHED),
     T.SETPOINTS: (JointState, LATCHED),
     T.STATUS: (DiagnosticArray, RELIABLE_10),
+    T.SYNC: (JointState, MEASUREMENTS),
 }
 """Every project topic -> (message class, QoS its publisher offers). A test checks it covers ``nodes.topics``."""
 
