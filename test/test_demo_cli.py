@@ -88,9 +88,12 @@ def start_demo(args, env):
 
 def test_progress_line_of_the_optimization():
     from kite_rto.tools.demo import eta_text
-    from kite_rto.tools.demo_optimize import OptimizeProgress, experiments_per_iteration
+    from kite_rto.core.kite_rto import KiteRTOSettings
+    from kite_rto.tools.demo_optimize import OptimizeProgress
 
-    assert experiments_per_iteration("forward") == 4 and experiments_per_iteration("central") == 7
+    per = {g: KiteRTOSettings(gradient=g).experiments_per_iteration() for g in ("forward", "central", "directional")}
+    assert per == {"forward": 4, "central": 7, "directional": 3}
+    assert KiteRTOSettings(n_directions=1).experiments_per_iteration() == 2
     assert (eta_text(None), eta_text(42.4), eta_text(125)) == ("ETA ?", "ETA 42 s", "ETA 2 min 05 s")
     p = OptimizeProgress(n_iter=10, per_iteration=4)
     first = p.text({"iteration": "0", "experiments_done": "0", "experiment": "k0-0-nominal"}, 12.0, 2.0)

@@ -28,6 +28,8 @@ from faultgraph import QUIET, SHORT, Watch, node, steering_recorder, stop_all
 from faultlog import fault_row
 from rosutil import Probe
 
+PER = KiteRTOSettings().experiments_per_iteration()   # experiments of one GMA iteration
+
 pytestmark = [pytest.mark.ros, pytest.mark.faults]
 DT_NS = 20_000_000
 NAN, INF = math.nan, math.inf
@@ -355,8 +357,8 @@ def test_bad_optimizer_inputs_keep_the_experiments_clean(probe, ros_env, request
     with fault_row(request, "bad measurements into the optimizer",
                    "probe publishes the controller's bad-input set on /kite/state, /kite/wind, /kite/tension and "
                    "/kite/position (NaN, Inf, out of range, wrong lengths and names, stamps 30 s behind and "
-                   "ahead), and bad /rto/sync messages to the synchronized controller, during a 4-experiment GMA "
-                   "iteration") as row:
+                   "ahead), and bad /rto/sync messages to the synchronized controller, during a "
+                   f"{PER}-experiment GMA iteration") as row:
         try:
             opt = node("optimizer", "optimizer", ros_env, tmp_path, {"db": str(db), **SHORT})
             procs.append(opt)
@@ -400,7 +402,7 @@ def test_bad_optimizer_inputs_keep_the_experiments_clean(probe, ros_env, request
                        f"rad, costs within {100 * rel:.2f} % (bit for bit: 0.00 %); "
                        f"{sum(warned.values())} value warnings + {discarded} stale/future-stamp warnings (throttled)")
         assert code == 0, opt.text()[-3000:]
-        assert counts == {"experiments": 4, "iterations": 1}
+        assert counts == {"experiments": PER, "iterations": 1}
         # The synchronized graph flies the pure runner's sequence bit for bit, so any bad message that got through
         # shows (before the stamp checks, nodes let junk through and the costs were 13 % off).
         assert dc == 0 and rel == 0, (dc, rel)

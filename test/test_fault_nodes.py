@@ -20,6 +20,8 @@ from kite_rto.core.controller import ControllerSettings
 from kite_rto.core.experiment import ExperimentSpec
 from kite_rto.core.kite_rto import KiteRTOSettings, RTOSession, make_kite_gma, run_kite_rto
 from kite_rto.core.path import Setpoints
+
+PER = KiteRTOSettings().experiments_per_iteration()   # experiments of one GMA iteration
 from kite_rto.core.plant import PlantConfig
 from kite_rto.gma import HistoryStore
 
@@ -157,7 +159,7 @@ def test_controller_and_optimizer_killed_and_restarted(probe, ros_env, request, 
                        f"the restarted controller answered {c['w_back']:.1f} s after its start, having first taken "
                        f"the current setpoints from the latched /rto/setpoints ({c['took']} deg, latched "
                        f"{c['latched']} deg); the loop ran on at {c['rate']:.0f}x real time; the iteration "
-                       "finished with all 4 experiments")
+                       f"finished with all {counts['experiments']} experiments")
         assert c["w_neutral"] < 3.0 and c["neutral_sim"] > 0.2 and c["synced"] == 1
         assert lost == 0 and unsafe == 0
     with fault_row(request, "optimizer killed and restarted",
@@ -169,7 +171,7 @@ def test_controller_and_optimizer_killed_and_restarted(probe, ros_env, request, 
                        f"{counts['experiments']} experiments, {repeated} measured twice, setpoints equal to the "
                        f"fault-free pure runner's within {dc:.1e} rad")
         assert o["code"] == 0, opt2.text()[-3000:]
-        assert resumed == 1 and counts == {"experiments": 4, "iterations": 1}
+        assert resumed == 1 and counts == {"experiments": PER, "iterations": 1}
         assert lost == 0 and repeated == 0 and dc < 1e-9 and unsafe == 0
 
 
@@ -209,7 +211,7 @@ def test_plant_killed_and_restarted_restarts_the_experiment(probe, ros_env, requ
                        f"pure runner's within {dc:.1e} rad")
         assert code == 0, opt.text()[-3000:]
         assert ctrl_sync == 1 and opt_restart == 1
-        assert counts == {"experiments": 4, "iterations": 1} and lost == 0 and repeated == 0 and dc < 1e-9
+        assert counts == {"experiments": PER, "iterations": 1} and lost == 0 and repeated == 0 and dc < 1e-9
         assert extra[0]["t_end"] <= t_kill                           # kept from the old plant
         assert extra[1]["t_start"] < 1.0 < extra[1]["t_end"]       # started again at the new plant's t = 0
         assert row.unsafe_setpoints == 0
@@ -247,13 +249,13 @@ def test_kite_crash_discards_and_repeats_the_experiment_pure(request):
         logs = session.experiments
         ids = [e.request_id for e in logs]
         stored_t = [r.extra["t_start"] for _, r in gma.history.experiments]
-        row.experiments_lost = 4 - len(set(ids) & {q.request_id for q, _ in gma.history.experiments})
+        row.experiments_lost = PER - len(set(ids) & {q.request_id for q, _ in gma.history.experiments})
         row.unsafe_setpoints = sum(unsafe(e.c) for e in logs)
         row.outcome = (f"crash at t = {crash_t:.1f} s counted ({m.crashes}) and relaunched; the experiment in "
                        f"progress was discarded and repeated ({logs[0].repeats} repeat, measured again from "
                        f"t = {stored_t[0]:.1f} s); the iteration completed with {len(logs)} distinct experiments")
         assert m.crashes == 1 and crash_t is not None and not session.failed and len(gma.records) == 1
-        assert [e.repeats for e in logs] == [1, 0, 0, 0] and len(set(ids)) == 4
+        assert [e.repeats for e in logs] == [1] + [0] * (PER - 1) and len(set(ids)) == PER
         assert stored_t[0] >= crash_t and row.experiments_lost == 0 and row.unsafe_setpoints == 0
 
 
@@ -290,5 +292,5 @@ def test_kite_crash_discards_and_repeats_the_experiment(probe, ros_env, request,
         assert code == 0, opt.text()[-3000:]
         assert len(crash) == 1 and watch.crashes == 1 and len(repeats) == 1, plant.text()[-2000:]
         assert t0 >= crash[0]
-        assert counts == {"experiments": 4, "iterations": 1} and lost == 0 and repeated == 0 and dc < 1e-9
+        assert counts == {"experiments": PER, "iterations": 1} and lost == 0 and repeated == 0 and dc < 1e-9
         assert row.unsafe_setpoints == 0

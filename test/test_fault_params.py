@@ -48,7 +48,7 @@ CASES = [
     ("zero laps per experiment", "optimizer", ["-p", "n_laps:=0"],
      ["parameter n_laps = 0", "expected an integer in [1, 100] laps"]),
     ("unknown gradient method", "optimizer", ["-p", "gradient:=newton"],
-     ["parameter gradient = 'newton'", "expected one of 'forward', 'central', 'least_squares'"]),
+     ["parameter gradient = 'newton'", "expected one of 'directional', 'forward', 'central', 'least_squares'"]),
     ("settle time not below the experiment limit", "optimizer", ["-p", "settle_time:=400.0"],
      ["parameters settle_time = 400.0, max_duration = 300.0", "expected settle_time < max_duration"]),
     ("exit_when_done with no iteration limit", "optimizer", ["-p", "exit_when_done:=true", "-p", "n_iter:=0"],

@@ -109,3 +109,45 @@ def test_session_repeats_a_crashed_experiment(quick_settings):
         t += 0.05
         again = session.on_measurement(_synthetic(t, crashes=1 if t > 3.0 else 0))
     assert again is not None and np.allclose(again, c) and session.repeats == 1 and not session.experiments
+
+
+def test_kite_privileged_directions_hold_theta_0_and_span_the_other_two():
+    from kite_rto.core.kite_rto import kite_directions
+    d = kite_directions(KiteRTOSettings())
+    # the model optimum is the box's lower corner; its theta_0 bound stays active under every deviation
+    assert d.fixed.tolist() == [True, False, False]
+    width = KiteRTOSettings().box.upper() - KiteRTOSettings().box.lower()
+    assert d.gradient[0] * width[0] > 2.0 * np.max(np.abs(d.sensitivity[0])) * width[0] > 0
+    assert d.directions.shape == (3, 2) and np.all(d.directions[0] == 0.0)
+    np.testing.assert_allclose(d.scaled.T @ d.scaled, np.eye(2), atol=1e-12)
+    assert abs(d.scaled[1, 0]) > 0.9                      # the leading direction is mostly A_phi (glide loss)
+    assert d.singular_values[0] > 3 * d.singular_values[1] > 0
+
+
+def test_a_directional_iteration_flies_the_nominal_and_one_experiment_per_direction(quick_settings):
+    from kite_rto.core.kite_rto import kite_directions
+    quiet = PlantConfig().without_disturbances()
+    res = run_kite_rto(quiet, seed=0, n_iter=1, settings=quick_settings)
+    assert quick_settings.gradient == "directional" and quick_settings.experiments_per_iteration() == 3
+    assert len(res.experiments) == 3 and res.records[0].gradient_method == "directional (2 of 3)"
+    assert len({e.c[0] for e in res.experiments}) == 1     # theta_0 is never perturbed
+    # the model supplies d phi / d theta_0: the estimate equals the model's there
+    rec = res.records[0]
+    assert rec.grad_cost[0] == pytest.approx(rec.grad_phi_hat[0], rel=1e-12)
+    assert not np.isclose(rec.grad_cost[1], rec.grad_phi_hat[1])
+    assert kite_directions(quick_settings).fixed[0]
+
+
+@pytest.mark.parametrize("bad, match", [
+    ({"n_directions": 4}, r"KiteRTOSettings.n_directions = 4: expected 1, 2 or 3"),
+    ({"gradient": "newton"}, r"KiteRTOSettings.gradient = 'newton': expected one of \('directional'"),
+])
+def test_kite_rto_settings_reject_bad_values(bad, match):
+    with pytest.raises(ValueError, match=match):
+        KiteRTOSettings(**bad)
+
+
+def test_model_uncertainty_rejects_zero_deviation():
+    from kite_rto.core.kite_dma import ModelUncertainty
+    with pytest.raises(ValueError, match=r"ModelUncertainty.c_E = 0.0: expected a finite nonzero deviation"):
+        ModelUncertainty(c_E=0.0)

@@ -14,6 +14,8 @@ from kite_rto.gma import HistoryStore
 
 from rosutil import Probe, start_node, stop
 
+PER = KiteRTOSettings().experiments_per_iteration()   # experiments of one GMA iteration
+
 pytestmark = pytest.mark.ros
 QUIET = {"turbulence": False, "anemometer_noise": 0.0, "noise_angle_deg": 0.0, "noise_rate": 0.0, "noise_tension": 0.0}
 SHORT = {"n_laps": 1, "settle_laps": 0, "n_iter": 1, "exit_when_done": True}
@@ -61,7 +63,7 @@ def test_graph_flies_the_pure_runners_sequence(probe, ros_env, tmp_path, plant_p
         stop(plant)
         ctrl_out = stop(ctrl)
     history, counts = stored(db)
-    assert counts == {"experiments": 4 * n_iter, "iterations": n_iter}, out
+    assert counts == {"experiments": PER * n_iter, "iterations": n_iter}, out
     settings = KiteRTOSettings(experiment=ExperimentSpec(n_laps=1, settle_laps=0))
     pure = run_kite_rto(config, seed=plant_params.get("seed", 0), n_iter=n_iter, settings=settings)
     ros_c = np.array([setpoints_from_shape(q.c) for q, _ in history.experiments])
@@ -96,8 +98,8 @@ def test_killed_optimizer_resumes_from_its_database(probe, ros_env, tmp_path):
         ctrl_out = stop(ctrl)
     history, counts = stored(db)
     ids = [q.request_id for q, _ in history.experiments]
-    assert counts == {"experiments": 4, "iterations": 1}
-    assert len(set(ids)) == 4 and done_before <= set(ids)
+    assert counts == {"experiments": PER, "iterations": 1}
+    assert len(set(ids)) == PER and done_before <= set(ids)
     assert f"resumed from {db}: {len(done_before)} experiments" in out
     # the synchronized controller flew on without the killed optimizer, then synchronized with the new one
     assert "steering unsynchronized" in ctrl_out and "/rto/sync is back" in ctrl_out, ctrl_out

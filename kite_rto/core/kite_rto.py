@@ -14,11 +14,13 @@
 * :func:`run_kite_rto` — one :class:`KitePlant` + :class:`PathController` flying continuously, the session
   changing the setpoints; returns an :class:`RTOResult` with every :class:`IterationRecord`.
 
-Tuning (``benchmarks/bench_normalization.py``): with turbulence a lap's tension scatters by ~145 kN raw and
-~34 kN after the tension-coefficient normalization (lap-to-lap correlation ~0.4), while the whole setpoint box
-spans only ~25 kN of plant tension. Finite-difference steps therefore take half the box width (the
-``from_noise`` rule asks for more than the box), each experiment averages 4 laps, and the filter gain and trust
-region are moderate so that one noisy gradient cannot throw the iterate across the box.
+Tuning (``benchmarks/bench_rto.py``, ``benchmarks/bench_normalization.py``): after the tension-coefficient
+normalization a 4-lap experiment's mean scatters by ~1.4 kN, far less than the differences over the
+finite-difference steps (half the box width). GMA therefore takes full steps (filter gain 1) inside a trust
+region of 0.7 box widths, and measures plant derivatives only along the two privileged directions of
+:mod:`~kite_rto.core.kite_dma` (directional modifier adaptation): theta_0 stays at its robustly active bound, so
+an iteration is 3 experiments instead of 4. The back-off of 4 m keeps the linearized altitude constraint from
+overshooting the real one after a long step.
 """
 from __future__ import annotations
 
@@ -28,19 +30,21 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..gma import GMA, ExperimentResult, FiniteDifferenceGradient, GMASettings, LeastSquaresGradient
+from ..gma import (GMA, DirectionalGradient, ExperimentResult, FiniteDifferenceGradient, GMASettings,
+                   LeastSquaresGradient)
 from .closed_loop import make_closed_loop
 from .controller import ControllerSettings
 from .experiment import ExperimentEvaluator, ExperimentOutcome, ExperimentSpec
+from .kite_dma import ModelUncertainty, kite_privileged_directions
 from .kite_ocp import KiteOCPSettings, kite_model_problem
 from .params import KiteParams
 from .path import Setpoints, ShapeBox, setpoints_from_shape, shape_from_setpoints
 from .plant import PlantConfig
 
-__all__ = ["KiteRTOSettings", "kite_problem", "make_kite_gma", "RTOSession", "ExperimentLog", "RTOResult",
+__all__ = ["KiteRTOSettings", "kite_problem", "kite_directions", "make_kite_gma", "RTOSession", "ExperimentLog", "RTOResult",
            "run_kite_rto", "model_only_optimum"]
 
-_GRADIENTS = ("forward", "central", "least_squares")
+_GRADIENTS = ("directional", "forward", "central", "least_squares")
 
 
 @dataclass(frozen=True)
@@ -50,9 +54,14 @@ class KiteRTOSettings:
     Attributes:
         experiment: :class:`ExperimentSpec` of every experiment (nominal and perturbations).
         box: the optimizer's :class:`ShapeBox` (shape coordinates); every point of it tracks.
-        gradient: ``"forward"`` / ``"central"`` finite differences, or ``"least_squares"`` over past points
-            with forward differences as fallback.
-        fd_step: finite-difference step per shape coordinate, relative to the box width, in (0, 1].
+        gradient: ``"directional"`` (DMA: forward differences along ``n_directions`` privileged directions,
+            the model's gradient elsewhere), ``"forward"`` / ``"central"`` finite differences in every shape
+            coordinate, or ``"least_squares"`` over past points with forward differences as fallback.
+        fd_step: finite-difference step per shape coordinate, relative to the box width, in (0, 1]; for
+            ``"directional"`` the first value is the step along each privileged direction (box widths).
+        n_directions: privileged directions of ``"directional"`` (1 or 2 on the kite: theta_0 is held at a
+            robustly active bound).
+        uncertainty: the model-parameter deviations that define the privileged directions.
         filter_gain: GMA input filter K, in (0, 1].
         modifier_filter: GMA's first-order filter on the gradient modifiers, in (0, 1] (1 = none).
         trust_radius: initial GMA trust radius (relative to the box width), > 0.
@@ -65,13 +74,15 @@ class KiteRTOSettings:
 
     experiment: ExperimentSpec = field(default_factory=lambda: ExperimentSpec(n_laps=4))
     box: ShapeBox = field(default_factory=ShapeBox)
-    gradient: str = "forward"
+    gradient: str = "directional"
     fd_step: tuple = (0.5, 0.5, 0.5)
-    filter_gain: float = 0.6
+    n_directions: int = 2
+    uncertainty: ModelUncertainty = field(default_factory=ModelUncertainty)
+    filter_gain: float = 1.0
     modifier_filter: float = 1.0
-    trust_radius: float = 0.4
+    trust_radius: float = 0.7
     trust_radius_min: float = 0.05
-    backoff: float = 2.0
+    backoff: float = 4.0
     max_repeats: int = 3
     c0: tuple | None = None
 
@@ -90,6 +101,8 @@ class KiteRTOSettings:
                 raise ValueError(f"{n}.{f} = {getattr(self, f)!r}: expected a value > 0")
         if not self.backoff >= 0:
             raise ValueError(f"{n}.backoff = {self.backoff!r}: expected a value >= 0")
+        if isinstance(self.n_directions, bool) or self.n_directions not in (1, 2, 3):
+            raise ValueError(f"{n}.n_directions = {self.n_directions!r}: expected 1, 2 or 3")
         if isinstance(self.max_repeats, bool) or not isinstance(self.max_repeats, int) or self.max_repeats < 0:
             raise ValueError(f"{n}.max_repeats = {self.max_repeats!r}: expected an integer >= 0")
 
@@ -102,10 +115,20 @@ class KiteRTOSettings:
                            backoff=self.backoff, settle_time=sp.settle_time, averaging=float(sp.n_laps),
                            tol_c=1e-3)
 
-    def gradient_estimator(self):
-        """The plant-gradient strategy (absolute steps, rad)."""
+    def experiments_per_iteration(self) -> int:
+        """Nominal + perturbation experiments of one iteration (least squares: when it falls back)."""
+        n = {"directional": self.n_directions, "central": 6}.get(self.gradient, 3)
+        return 1 + n
+
+    def gradient_estimator(self, directions=None):
+        """The plant-gradient strategy (absolute steps, rad); ``"directional"`` needs the privileged
+        ``directions`` (3, r) in shape coordinates (:func:`make_kite_gma` computes them)."""
         width = self.box.upper() - self.box.lower()
         steps = np.broadcast_to(np.asarray(self.fd_step, dtype=float), (3,)) * width
+        if self.gradient == "directional":
+            if directions is None:
+                raise ValueError("KiteRTOSettings.gradient_estimator: 'directional' needs the privileged directions")
+            return DirectionalGradient(directions, step=float(np.ravel(self.fd_step)[0]), reuse=False)
         if self.gradient == "least_squares":
             return LeastSquaresGradient(FiniteDifferenceGradient(steps), radius=2.0 * steps, window=8)
         return FiniteDifferenceGradient(steps, self.gradient)
@@ -122,17 +145,30 @@ def kite_problem(box: ShapeBox = ShapeBox(), model_params: KiteParams = KitePara
 @lru_cache(maxsize=4)
 def _model_optimum_cached(box, model_params, ocp) -> tuple:
     from .kite_ocp_solve import solve_model_optimum
-    sol = solve_model_optimum(kite_problem(box, model_params, ocp))
+    pr = kite_problem(box, model_params, ocp)
+    sol = solve_model_optimum(pr)
     x = np.clip(sol.c, box.lower(), box.upper())
-    return tuple(setpoints_from_shape(x).tolist()), sol.mean_tension_kn, sol.min_altitude
+    i = pr.equalities.numel() + pr.inner_constraints.numel()
+    nu = np.maximum(sol.lam_g[i:i + pr.n_g], 0.0)        # multipliers of g(u) <= 0 at the model optimum
+    return (tuple(setpoints_from_shape(x).tolist()), sol.mean_tension_kn, sol.min_altitude, tuple(x.tolist()),
+            tuple(nu.tolist()))
 
 
 def model_only_optimum(box: ShapeBox = ShapeBox(), model_params: KiteParams = KiteParams(),
                        ocp: KiteOCPSettings = KiteOCPSettings()) -> tuple:
     """``(c setpoints rad (3,), model mean tension kN, model min altitude m)`` of the model's own optimum in
     ``box``."""
-    c, t, z = _model_optimum_cached(box, model_params, ocp)
+    c, t, z, _, _ = _model_optimum_cached(box, model_params, ocp)
     return np.array(c), t, z
+
+
+def kite_directions(settings: KiteRTOSettings, model_params: KiteParams = KiteParams(),
+                    ocp: KiteOCPSettings = KiteOCPSettings()):
+    """The :class:`~kite_rto.gma.PrivilegedDirections` of ``settings`` (shape coordinates), computed at the
+    model optimum in ``settings.box`` (cached per process; ~7 s the first time)."""
+    _, _, _, x_opt, nu = _model_optimum_cached(settings.box, model_params, ocp)
+    return kite_privileged_directions(settings.box, x_opt, nu, model_params, ocp, settings.uncertainty,
+                                      settings.n_directions)
 
 
 def make_kite_gma(settings: KiteRTOSettings | None = None, model_params: KiteParams | None = None,
@@ -152,7 +188,9 @@ def make_kite_gma(settings: KiteRTOSettings | None = None, model_params: KitePar
     if c0 is None:
         c0 = settings.c0 if settings.c0 is not None else model_only_optimum(settings.box, model_params, ocp)[0]
     x0 = np.clip(shape_from_setpoints(c0), settings.box.lower(), settings.box.upper())
-    return GMA(problem, settings.gma_settings(), settings.gradient_estimator(), c0=x0, history=history)
+    directions = kite_directions(settings, model_params, ocp).directions if settings.gradient == "directional" \
+        else None
+    return GMA(problem, settings.gma_settings(), settings.gradient_estimator(directions), c0=x0, history=history)
 
 
 @dataclass

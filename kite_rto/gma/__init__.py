@@ -4,6 +4,7 @@ Plant and model may have different inputs: the plant takes setpoints ``c``, the 
 predicts the controlled variables ``y(u)``. With ``y(u) = u`` this is standard Modifier Adaptation.
 The core knows nothing about kites and never imports ``rclpy``. See ``docs/gma.md``.
 """
+from .directional import DirectionalGradient, PrivilegedDirections, lagrangian_gradient, privileged_directions
 from .gma import GMA, ModelRealization
 from .gradients import (FiniteDifferenceGradient, GradientEstimate, GradientEstimator, LeastSquaresGradient,
                         PlantPoint)
@@ -14,5 +15,6 @@ from .settings import GMASettings
 from .store import HistoryStore
 
 __all__ = ["HistoryStore", "ModelProblem", "GMASettings", "GMA", "ModelRealization", "GradientEstimator", "GradientEstimate",
-           "PlantPoint", "FiniteDifferenceGradient", "LeastSquaresGradient", "ExperimentRequest",
+           "PlantPoint", "FiniteDifferenceGradient", "LeastSquaresGradient", "DirectionalGradient",
+           "PrivilegedDirections", "privileged_directions", "lagrangian_gradient", "ExperimentRequest",
            "ExperimentResult", "IterationRecord", "History", "run_offline"]

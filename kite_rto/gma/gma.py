@@ -249,8 +249,10 @@ class GMA:
         ordered = [results[q.request_id] for q in self.history.pending]
         pts = [PlantPoint(q.c, r.cost, r.constraints, r.cost_std, r.constraints_std) for q, r in ordered]
         nominal = pts[0]
-        est = self.gradient.estimate(c_k, nominal, pts[1:], self._points(exclude_iteration=k))
         model = self.linearize(c_k)
+        past = self._points(exclude_iteration=k)
+        est = (self.gradient.estimate(c_k, nominal, pts[1:], past, model=model) if self.gradient.uses_model
+               else self.gradient.estimate(c_k, nominal, pts[1:], past))
         notes = [est.notes] if est.notes else []
         eps = nominal.constraints - model.g
         lam = est.cost - model.grad_phi

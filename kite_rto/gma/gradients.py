@@ -59,7 +59,14 @@ class GradientEstimate:
 
 
 class GradientEstimator(ABC):
-    """Common interface of the plant-gradient strategies (see the module docstring)."""
+    """Common interface of the plant-gradient strategies (see the module docstring).
+
+    ``uses_model``: a strategy that sets it True gets the model's linearization at ``c_k`` (a
+    :class:`~kite_rto.gma.ModelRealization`, with ``grad_phi`` and ``jac_g``) as ``estimate(..., model=...)``,
+    e.g. :class:`~kite_rto.gma.DirectionalGradient`, which takes the model's gradient outside its directions.
+    """
+
+    uses_model: bool = False
 
     @abstractmethod
     def plan(self, c_k: np.ndarray, lb: np.ndarray, ub: np.ndarray,

@@ -53,9 +53,13 @@ PARAMS = (
               1.0, 1e5, unit="s"),
     ParamSpec("normalize", _E.normalize, "normalize lap tension by the measured reference wind"),
     ParamSpec("h_min", _E.h_min, "minimum altitude (the constraint)", 0.0, 1000.0, unit="m"),
-    ParamSpec("gradient", _S.gradient, "plant gradient estimation", choices=("forward", "central", "least_squares")),
-    ParamSpec("fd_step", float(_S.fd_step[0]), "finite-difference step", 0.01, 1.0,
-              unit="fraction of the shape box width"),
+    ParamSpec("gradient", _S.gradient, "plant gradient estimation: directional (DMA: privileged directions "
+              "only), or finite differences in every shape coordinate", choices=("directional", "forward",
+                                                                                 "central", "least_squares")),
+    ParamSpec("n_directions", _S.n_directions, "privileged directions measured per iteration (gradient "
+              "directional); theta_0 is held at a robustly active bound, so at most 2", 1, 2, unit="directions"),
+    ParamSpec("fd_step", float(_S.fd_step[0]), "finite-difference step (directional: along each direction)",
+              0.01, 1.0, unit="fraction of the shape box width"),
     ParamSpec("filter_gain", _S.filter_gain, "GMA input filter K", 0.01, 1.0, unit="dimensionless"),
     ParamSpec("modifier_filter", _S.modifier_filter, "GMA filter on the gradient modifiers (1 = none)", 0.01, 1.0,
               unit="dimensionless"),
@@ -114,7 +118,7 @@ class OptimizerNode(Node):
             spec = replace(_E, n_laps=v["n_laps"], settle_laps=v["settle_laps"], settle_time=v["settle_time"],
                            max_duration=v["max_duration"], normalize=v["normalize"], h_min=v["h_min"])
             self.settings = replace(_S, experiment=spec, box=_shape_box(v), gradient=v["gradient"],
-                                    fd_step=(v["fd_step"],) * 3, filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
+                                    n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3, filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
                                     trust_radius=v["trust_radius"])
         except ValueError as err:
             raise ParameterError(str(err)) from None

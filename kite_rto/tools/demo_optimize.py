@@ -21,11 +21,6 @@ def _wait(pred, rec, timeout: float) -> bool:
     return pred()
 
 
-def experiments_per_iteration(gradient: str = "forward", n_c: int = 3) -> int:
-    """Nominal + perturbation experiments of one GMA iteration (forward: 1 + n_c, central: 1 + 2 n_c)."""
-    return 1 + (2 * n_c if gradient == "central" else n_c)
-
-
 class OptimizeProgress:
     """Progress of the GMA run from the optimizer's /rto/status: iteration k/N, experiment, ETA.
 
@@ -85,7 +80,7 @@ def optimize(args, env, out: Path, progress) -> int:
     procs = []
     wall0 = time.monotonic()
     code, interrupted = 1, False
-    tracker = OptimizeProgress(args.iterations, experiments_per_iteration(KiteRTOSettings().gradient))
+    tracker = OptimizeProgress(args.iterations, KiteRTOSettings().experiments_per_iteration())
     try:
         extra = start_recorder(args, log, env, rec, procs)
         plant_params = {"seed": args.seed, "wait_subscribers": 3 + extra}   # controller, optimizer, demo (+ recorder)
