@@ -10,7 +10,8 @@ reaches 99 %. The summary gives, per seed, the baseline's time to 99 % over GMA'
 did not reach 99 % within its budget: the ratio is then above ``x``).
 
 Usage: ``python benchmarks/bench_rto.py [--seeds 5] [--iters 10] [--budget 4] [--anemometer-correlation 1.0]
-[--quick] [--no-baselines]`` (``--quick``: 2 seeds, 5 iterations).
+[--gradient directional] [--n-directions 2] [--quick] [--no-baselines]`` (``--quick``: 2 seeds, 5 iterations).
+With the directional gradient it first prints DMA's privileged directions.
 """
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ from dataclasses import replace
 import numpy as np
 
 from kite_rto.core.baselines import finite_difference_ascent, model_only, nelder_mead_plant, time_to_target
-from kite_rto.core.kite_rto import KiteRTOSettings, model_only_optimum, run_kite_rto
+from kite_rto.core.kite_rto import KiteRTOSettings, kite_directions, model_only_optimum, run_kite_rto
 from kite_rto.core.oracle import find_oracle, plant_performance
 from kite_rto.core.plant import PlantConfig
 
@@ -40,6 +41,10 @@ def main(argv=None) -> int:
     ap.add_argument("--budget", type=float, default=4.0, help="baseline flight time / GMA flight time")
     ap.add_argument("--anemometer-correlation", type=float, default=None,
                     help="plant anemometer gust correlation (default: PlantConfig's)")
+    ap.add_argument("--gradient", default=KiteRTOSettings().gradient,
+                    choices=("directional", "forward", "central", "least_squares"), help="GMA's plant gradient")
+    ap.add_argument("--n-directions", type=int, default=KiteRTOSettings().n_directions,
+                    help="privileged directions (gradient directional)")
     args = ap.parse_args(argv)
     if args.quick:
         args.seeds, args.iters = min(args.seeds, 2), min(args.iters, 5)
@@ -48,7 +53,7 @@ def main(argv=None) -> int:
     if args.anemometer_correlation is not None:
         config = replace(config, turbulence=replace(config.turbulence,
                                                     anemometer_correlation=args.anemometer_correlation))
-    settings = KiteRTOSettings()
+    settings = KiteRTOSettings(gradient=args.gradient, n_directions=args.n_directions)
     oracle = find_oracle(config, settings.box)
     target = 0.99 * oracle.tension_kn
     c0, t_model, _ = model_only_optimum(settings.box)
@@ -57,6 +62,12 @@ def main(argv=None) -> int:
           f"correlation {config.turbulence.anemometer_correlation:g}), experiment {settings.experiment.n_laps} laps "
           f"+ 1 settle lap, gradient {settings.gradient} fd_step {settings.fd_step}; baselines get {args.budget:g}x "
           f"GMA's time to 99 %")
+    if settings.gradient == "directional":
+        d = kite_directions(settings)
+        dirs = "; ".join("(" + ", ".join(f"{v:+.3f}" for v in col) + ")" for col in d.scaled.T)
+        print(f"privileged directions (theta_0, A_phi, aspect in box widths): {dirs}; held at a robustly active "
+              f"bound: {[n for n, f in zip(('theta_0', 'A_phi', 'aspect'), d.fixed) if f]}; singular values "
+              f"{np.round(d.singular_values, 2).tolist()} kN per box width, captured {100 * d.captured:.1f} %")
     print(f"oracle (deterministic plant): c = {_deg(oracle.c)} deg, {oracle.tension_kn:.1f} kN, "
           f"min alt {oracle.min_altitude:.1f} m ({oracle.evaluations} evaluations); target 99 % = {target:.1f} kN")
     print(f"model-only optimum: c = {_deg(c0)} deg, model says {t_model:.1f} kN; plant gives {t0:.1f} kN, "

@@ -57,7 +57,9 @@ class DirectionalGradient(GradientEstimator):
             (n_c,)); default ``2 * step * max_j |d_j|`` per setpoint, unbounded for a setpoint that no direction
             moves (its displacement is carried by the model's gradient).
         window: number of most recent usable past points (default ``2 r``).
-        rcond_min: conditioning threshold of the past points' direction coordinates ``z_j / step``, in (0, 1].
+        rcond_min: threshold, in (0, 1], on the quality of the past points' direction coordinates ``z_j / step``
+            for reuse: ``min(s_min, 1) / max(s_max, 1)`` of their singular values, 1 for full steps along every
+            direction, smaller for short, long or ill-conditioned ones (also ``GradientEstimate.quality``).
 
     A perturbation that would leave the setpoint box is taken backwards, and clipped to the box when that
     leaves it too (whichever keeps more of the direction). The fit always uses the setpoints actually flown.

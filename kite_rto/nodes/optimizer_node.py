@@ -57,7 +57,8 @@ PARAMS = (
               "only), or finite differences in every shape coordinate", choices=("directional", "forward",
                                                                                  "central", "least_squares")),
     ParamSpec("n_directions", _S.n_directions, "privileged directions measured per iteration (gradient "
-              "directional); theta_0 is held at a robustly active bound, so at most 2", 1, 2, unit="directions"),
+              "directional), at most the setpoints not held at a robustly active bound (2 on the default box, "
+              "where theta_0 is held)", 1, 3, unit="directions"),
     ParamSpec("fd_step", float(_S.fd_step[0]), "finite-difference step (directional: along each direction)",
               0.01, 1.0, unit="fraction of the shape box width"),
     ParamSpec("filter_gain", _S.filter_gain, "GMA input filter K", 0.01, 1.0, unit="dimensionless"),
@@ -124,7 +125,11 @@ class OptimizerNode(Node):
             raise ParameterError(str(err)) from None
         self.store = HistoryStore(v["db"])
         history = self.store.load() if v["resume"] else None
-        self.gma = make_kite_gma(self.settings, history=history)
+        try:   # e.g. more privileged directions than setpoints free to move on this box
+            self.gma = make_kite_gma(self.settings, history=history)
+        except ValueError as err:
+            raise ParameterError(f"parameters gradient = {v['gradient']!r}, n_directions = {v['n_directions']}: "
+                                 f"{err}") from None
         if history is None:
             self.store.save_history(self.gma.history)
         self.session = RTOSession(self.gma, spec, self.settings.max_repeats)

@@ -1,0 +1,22 @@
+"""kite_rto.tools.compare_pure: a database the pure runner wrote compares equal; a changed cost does not."""
+import numpy as np
+
+from kite_rto.core.kite_rto import run_kite_rto
+from kite_rto.core.plant import PlantConfig
+from kite_rto.gma import HistoryStore
+from kite_rto.tools.compare_pure import compare_histories, main
+
+
+def test_pure_database_compares_identical_and_a_changed_cost_is_found(tmp_path, capsys):
+    res = run_kite_rto(PlantConfig(), seed=2, n_iter=1)
+    db = tmp_path / "rto.sqlite"
+    store = HistoryStore(str(db))
+    store.save_history(res.history)
+    store.close()
+    assert main(["--db", str(db), "--seed", "2"]) == 0
+    assert "bit for bit: 3 experiments" in capsys.readouterr().out
+    other = HistoryStore(str(db)).load()
+    other.experiments[1][1].cost = float(np.nextafter(other.experiments[1][1].cost, 0.0))   # one ulp
+    diff = compare_histories(other, res.history)
+    assert len(diff) == 1 and diff[0].startswith("experiment k0-1-perturbation: cost")
+    assert main(["--db", str(tmp_path / "missing.sqlite")]) == 2
