@@ -4,6 +4,8 @@ Run: ``python benchmarks/bench_ocp.py [--repeats 10]``. Rows:
 
 * build: ``kite_model_problem`` (symbolic graph) and the first ``nlpsol`` (derivative generation);
 * cold: model optimum from ``u0``; realization of an interior setpoint from its figure-eight guess;
+* optimizer start-up: DMA's privileged directions (one realization NLP per uncertain parameter, with the
+  shape-box model optimum) and then :func:`make_kite_gma` (GMA's NLPs), once each, cold;
 * warm: median over ``repeats`` re-solves after a small change (setpoints moved ~0.5 deg; or the model
   optimum with small random GMA modifiers ``lambda^T (y - c_k)``, ``eps + mu^T (y - c_k)``, which is the
   problem the GMA optimizer solves each iteration), each warm-started from the unmodified solution.
@@ -19,6 +21,7 @@ import numpy as np
 
 from kite_rto.core.kite_ocp import kite_model_problem
 from kite_rto.core.kite_ocp_solve import realize_setpoints, solve_model_optimum
+from kite_rto.core.kite_rto import KiteRTOSettings, kite_directions, make_kite_gma
 
 DEG = math.pi / 180.0
 WARM = {"print_level": 0, "sb": "yes", "tol": 1e-8, "warm_start_init_point": "yes", "mu_init": 1e-4}
@@ -66,6 +69,15 @@ def main(repeats: int = 10):
         ok += bool(solver.stats()["success"])
     rows.append(("warm GMA-modified optimum (|lam|,|mu|~20 kN/rad)", float(np.median(times)), int(np.median(iters)),
                  f"{ok}/{repeats} ok"))
+
+    settings = KiteRTOSettings()
+    t0 = time.perf_counter()
+    d = kite_directions(settings)
+    rows.append(("start-up: DMA privileged directions (cold)", time.perf_counter() - t0, "",
+                 f"{len(settings.uncertainty.names())} parameters, {d.directions.shape[1]} directions"))
+    t0 = time.perf_counter()
+    make_kite_gma(settings)
+    rows.append(("start-up: make_kite_gma after that (GMA's NLPs)", time.perf_counter() - t0, "", ""))
 
     print(f"kite lap OCP: N = {pr.settings.n_intervals}, substeps = {pr.settings.substeps}, n_u = {pr.n_u}")
     print(f"model optimum: c = {np.round(opt.c / DEG, 2)} deg, mean tension {opt.mean_tension_kn:.1f} kN, "

@@ -67,7 +67,7 @@ def kite_privileged_directions(box: ShapeBox, x0: tuple, nu: tuple, model_params
                                uncertainty: ModelUncertainty = ModelUncertainty(),
                                n_directions: int = 2) -> PrivilegedDirections:
     """DMA's privileged directions (shape coordinates) at the model optimum ``x0`` with constraint multipliers
-    ``nu`` (tuples, for the cache); about 1.5 s per uncertain parameter (one realization NLP each)."""
+    ``nu`` (tuples, for the cache); one realization NLP per uncertain parameter and one nominal, about 2 s each."""
     x0 = np.asarray(x0, dtype=float)
     nu = np.asarray(nu, dtype=float)
     settings, names = GMASettings(), uncertainty.names()

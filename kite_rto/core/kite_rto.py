@@ -165,7 +165,7 @@ def model_only_optimum(box: ShapeBox = ShapeBox(), model_params: KiteParams = Ki
 def kite_directions(settings: KiteRTOSettings, model_params: KiteParams = KiteParams(),
                     ocp: KiteOCPSettings = KiteOCPSettings()):
     """The :class:`~kite_rto.gma.PrivilegedDirections` of ``settings`` (shape coordinates), computed at the
-    model optimum in ``settings.box`` (cached per process; ~7 s the first time)."""
+    model optimum in ``settings.box`` (cached per process; 10.6 s the first time in `benchmarks/bench_ocp.py`)."""
     _, _, _, x_opt, nu = _model_optimum_cached(settings.box, model_params, ocp)
     return kite_privileged_directions(settings.box, x_opt, nu, model_params, ocp, settings.uncertainty,
                                       settings.n_directions)
