@@ -10,7 +10,7 @@ reaches 99 %. The summary gives, per seed, the baseline's time to 99 % over GMA'
 did not reach 99 % within its budget: the ratio is then above ``x``).
 
 Usage: ``python benchmarks/bench_rto.py [--seeds 5] [--iters 10] [--budget 4] [--anemometer-correlation 1.0]
-[--gradient directional] [--n-directions 2] [--quick] [--no-baselines]`` (``--quick``: 2 seeds, 5 iterations).
+[--gradient directional] [--n-directions 2] [--backoff 6] [--first-seed 0] [--quick] [--no-baselines]`` (``--quick``: 2 seeds, 5 iterations).
 With the directional gradient it first prints DMA's privileged directions.
 """
 from __future__ import annotations
@@ -45,6 +45,9 @@ def main(argv=None) -> int:
                     choices=("directional", "forward", "central", "least_squares"), help="GMA's plant gradient")
     ap.add_argument("--n-directions", type=int, default=KiteRTOSettings().n_directions,
                     help="privileged directions (gradient directional)")
+    ap.add_argument("--backoff", type=float, default=KiteRTOSettings().backoff,
+                    help="GMA's altitude back-off, m")
+    ap.add_argument("--first-seed", type=int, default=0, help="seeds first-seed .. first-seed + seeds - 1")
     args = ap.parse_args(argv)
     if args.quick:
         args.seeds, args.iters = min(args.seeds, 2), min(args.iters, 5)
@@ -53,15 +56,15 @@ def main(argv=None) -> int:
     if args.anemometer_correlation is not None:
         config = replace(config, turbulence=replace(config.turbulence,
                                                     anemometer_correlation=args.anemometer_correlation))
-    settings = KiteRTOSettings(gradient=args.gradient, n_directions=args.n_directions)
+    settings = KiteRTOSettings(gradient=args.gradient, n_directions=args.n_directions, backoff=args.backoff)
     oracle = find_oracle(config, settings.box)
     target = 0.99 * oracle.tension_kn
     c0, t_model, _ = model_only_optimum(settings.box)
     t0, z0 = plant_performance(config, c0)
     print(f"bench_rto: {args.seeds} seeds x {args.iters} GMA iterations, plant default (turbulence on, anemometer "
           f"correlation {config.turbulence.anemometer_correlation:g}), experiment {settings.experiment.n_laps} laps "
-          f"+ 1 settle lap, gradient {settings.gradient} fd_step {settings.fd_step}; baselines get {args.budget:g}x "
-          f"GMA's time to 99 %")
+          f"+ 1 settle lap, gradient {settings.gradient} fd_step {settings.fd_step} back-off {settings.backoff:g} m; "
+          f"baselines get {args.budget:g}x GMA's time to 99 %")
     if settings.gradient == "directional":
         d = kite_directions(settings)
         dirs = "; ".join("(" + ", ".join(f"{v:+.3f}" for v in col) + ")" for col in d.scaled.T)
@@ -81,7 +84,7 @@ def main(argv=None) -> int:
     def reached(c) -> bool:
         tension, z = plant_performance(config, c)
         return tension >= target and z >= 100.0 - 2.0
-    for seed in range(args.seeds):
+    for seed in range(args.first_seed, args.first_seed + args.seeds):
         res = run_kite_rto(config, seed, args.iters, settings)
         k, t = time_to_target(res.iterates, res.iterate_times, config, target)
         tf, zf = plant_performance(config, res.iterates[-1])

@@ -150,6 +150,7 @@ class PlantNode(Node):
         self._last_publish = time.monotonic()
         self._neutral = False
         self._commands = 0
+        self._sample0_to_all = False     # sample 0 published while every expected subscriber was matched
         self._crashes = 0
         self._reject = RejectLog(self.get_logger())        # throttled warnings about bad steering messages
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -201,9 +202,15 @@ class PlantNode(Node):
                     self._reject("steering stamp", f"rejected steering stamped {stamp * 1e-9:.3f} s at sim time "
                                                    f"{now * 1e-9:.3f} s (stale or future)")
                 return
-            if not self._commands and self.pub_state.get_subscription_count() < self.p["wait_subscribers"]:
-                self._waiting_log()
-                return                     # hold sample 0 until every expected observer is connected
+            if not self._commands and not self._sample0_to_all:
+                # Hold sample 0 until every expected observer is connected. A subscriber that the writer matched
+                # after the answered copy went out may never get it (volatile durability), so answer only a copy
+                # published once all are matched: publish it again now and go on when that one is answered.
+                if self.pub_state.get_subscription_count() < self.p["wait_subscribers"]:
+                    self._waiting_log()
+                else:
+                    self.publish_sample()
+                return
         elif stamp > now or now - stamp > max(5 * self._dt_ns, _LATE_NS):
             self._reject("steering stamp", f"rejected steering stamped {stamp * 1e-9:.3f} s at sim time "
                                            f"{now * 1e-9:.3f} s (stale or future)")
@@ -289,6 +296,8 @@ class PlantNode(Node):
         # last: in lockstep its arrival means the sample is complete
         self.pub_state.publish(self._msg_state(ns, (m.theta, m.phi, m.psi, m.theta_dot, m.phi_dot, m.psi_dot)))
         self._last_publish = time.monotonic()
+        if not self._sample0_to_all and self.pub_state.get_subscription_count() >= self.p["wait_subscribers"]:
+            self._sample0_to_all = True
 
 
 def main(args=None) -> None:
