@@ -43,8 +43,8 @@ from .params import KiteParams
 from .path import Setpoints, ShapeBox, setpoints_from_shape, shape_from_setpoints
 from .plant import PlantConfig
 
-__all__ = ["KiteRTOSettings", "kite_problem", "kite_directions", "make_kite_gma", "RTOSession", "ExperimentLog", "RTOResult",
-           "run_kite_rto", "model_only_optimum"]
+__all__ = ["KiteRTOSettings", "kite_problem", "kite_directions", "make_kite_gma", "RTOSession", "ExperimentLog",
+           "RTOResult", "run_kite_rto", "model_only_optimum"]
 
 _GRADIENTS = ("directional", "forward", "central", "least_squares")
 

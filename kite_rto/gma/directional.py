@@ -29,19 +29,11 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ._nlp import RealizationNLP
-from .gradients import GradientEstimate, GradientEstimator, PlantPoint
+from .gradients import GradientEstimate, GradientEstimator, PlantPoint, _positive
 from .problem import ModelProblem
 from .settings import GMASettings
 
 __all__ = ["DirectionalGradient", "PrivilegedDirections", "privileged_directions", "lagrangian_gradient"]
-
-
-def _finite_positive(name: str, value, n: int | None = None) -> np.ndarray:
-    arr = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
-    if arr.size == 0 or not np.all(np.isfinite(arr)) or np.any(arr <= 0) or (n is not None and arr.size not in (1, n)):
-        want = "finite values > 0" + (f" (1 or {n} of them)" if n is not None else "")
-        raise ValueError(f"{name}={value!r}: expected {want}")
-    return arr
 
 
 class DirectionalGradient(GradientEstimator):
@@ -81,7 +73,7 @@ class DirectionalGradient(GradientEstimator):
                              f"(singular values {s.tolist()})")
         self.U = U
         self._U_pinv = np.linalg.pinv(U)
-        self.step = float(_finite_positive("DirectionalGradient.step", step)[0])
+        self.step = float(_positive("DirectionalGradient.step", step)[0])
         if not isinstance(reuse, bool):
             raise ValueError(f"DirectionalGradient.reuse={reuse!r}: expected True or False")
         self.reuse = reuse
@@ -89,7 +81,9 @@ class DirectionalGradient(GradientEstimator):
             reach = 2.0 * self.step * np.max(np.abs(U), axis=1)
             self.radius = np.where(reach > 0, reach, np.inf)
         else:
-            self.radius = _finite_positive("DirectionalGradient.radius", radius, U.shape[0])
+            self.radius = _positive("DirectionalGradient.radius", radius)
+            if self.radius.size not in (1, U.shape[0]):
+                raise ValueError(f"DirectionalGradient.radius={radius!r}: expected 1 or {U.shape[0]} values")
         if window is not None and (isinstance(window, bool) or not isinstance(window, int) or window < 1):
             raise ValueError(f"DirectionalGradient.window={window!r}: expected an integer >= 1 or None")
         self.window = window if window is not None else 2 * U.shape[1]
@@ -230,7 +224,9 @@ def privileged_directions(lagrangian_gradient: Callable[[np.ndarray], np.ndarray
     side = np.zeros(n_c) if at_bound is None else np.asarray(at_bound, dtype=float).ravel()
     if side.size != n_c or not np.all(np.isin(side, (-1.0, 0.0, 1.0))):
         raise ValueError(f"privileged_directions: at_bound={at_bound!r}: expected {n_c} values in -1, 0, +1")
-    w = np.ones(n_c) if scale is None else _finite_positive("privileged_directions: scale", scale, n_c)
+    w = np.ones(n_c) if scale is None else _positive("privileged_directions: scale", scale)
+    if w.size not in (1, n_c):
+        raise ValueError(f"privileged_directions: scale={scale!r}: expected 1 or {n_c} values")
     w = np.broadcast_to(w, (n_c,)).astype(float)
     cols = []
     for j in range(theta0.size):

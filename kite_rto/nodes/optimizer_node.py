@@ -119,7 +119,8 @@ class OptimizerNode(Node):
             spec = replace(_E, n_laps=v["n_laps"], settle_laps=v["settle_laps"], settle_time=v["settle_time"],
                            max_duration=v["max_duration"], normalize=v["normalize"], h_min=v["h_min"])
             self.settings = replace(_S, experiment=spec, box=_shape_box(v), gradient=v["gradient"],
-                                    n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3, filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
+                                    n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3,
+                                    filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
                                     trust_radius=v["trust_radius"])
         except ValueError as err:
             raise ParameterError(str(err)) from None
