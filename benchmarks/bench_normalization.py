@@ -17,9 +17,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from kite_rto.core.experiment import ExperimentSpec, PlantFlight
-from kite_rto.core.oracle import plant_performance
-from kite_rto.core.plant import PlantConfig
+from kite_rto.rto.experiment import ExperimentSpec, PlantFlight
+from kite_rto.rto.oracle import plant_performance
+from kite_rto.kite.plant import PlantConfig
 
 W_NOM = 8.0
 

@@ -19,9 +19,9 @@ import time
 import casadi as ca
 import numpy as np
 
-from kite_rto.core.kite_ocp import kite_model_problem
-from kite_rto.core.kite_ocp_solve import realize_setpoints, solve_model_optimum
-from kite_rto.core.kite_rto import KiteRTOSettings, kite_directions, make_kite_gma
+from kite_rto.rto.ocp import kite_model_problem
+from kite_rto.rto.ocp_solve import realize_setpoints, solve_model_optimum
+from kite_rto.rto.session import KiteRTOSettings, kite_directions, make_kite_gma
 
 DEG = math.pi / 180.0
 WARM = {"print_level": 0, "sb": "yes", "tol": 1e-8, "warm_start_init_point": "yes", "mu_init": 1e-4}

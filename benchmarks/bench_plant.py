@@ -18,8 +18,8 @@ import time
 
 import numpy as np
 
-from kite_rto.core.plant import KitePlant, PlantConfig
-from kite_rto.core.wind import Turbulence
+from kite_rto.kite.plant import KitePlant, PlantConfig
+from kite_rto.kite.wind import Turbulence
 
 TARGET_US = 20.0
 

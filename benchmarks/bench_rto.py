@@ -2,7 +2,7 @@
 
 GMA starts at the model-only optimum on the default plant (turbulence and noise on). Every iterate c_k is
 re-flown on the deterministic plant (turbulence and noise off); the target is >= 99 % of the oracle's mean
-tension (``kite_rto.core.oracle.find_oracle``, cached under runs/) with min altitude >= h_min - 2 m. The
+tension (``kite_rto.rto.oracle.find_oracle``, cached under runs/) with min altitude >= h_min - 2 m. The
 baselines (model-only, model-free finite-difference ascent, Nelder-Mead on the plant) get the same plant
 seed and the same experiment spec, and a flight-time budget of ``--budget`` times the flight time GMA needed
 to reach 99 % on that seed (its whole flight time if it did not); a baseline stops as soon as a candidate
@@ -22,10 +22,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from kite_rto.core.baselines import finite_difference_ascent, model_only, nelder_mead_plant, time_to_target
-from kite_rto.core.kite_rto import KiteRTOSettings, kite_directions, model_only_optimum, run_kite_rto
-from kite_rto.core.oracle import find_oracle, plant_performance
-from kite_rto.core.plant import PlantConfig
+from kite_rto.rto.baselines import finite_difference_ascent, model_only, nelder_mead_plant, time_to_target
+from kite_rto.rto.session import KiteRTOSettings, kite_directions, model_only_optimum, run_kite_rto
+from kite_rto.rto.oracle import find_oracle, plant_performance
+from kite_rto.kite.plant import PlantConfig
 
 
 def _deg(c):

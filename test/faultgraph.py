@@ -21,8 +21,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
-from kite_rto.core.params import KiteParams
-from kite_rto.core.path import SetpointBox, SetpointError, validate_setpoints
+from kite_rto.kite.params import KiteParams
+from kite_rto.flight.path import SetpointBox, SetpointError, validate_setpoints
 from kite_rto.nodes.common import LATCHED, RELIABLE_10, stamp_to_ns
 from kite_rto.tools.graph import node_command
 from rosutil import Probe

@@ -4,10 +4,10 @@ import math
 import numpy as np
 import pytest
 
-from kite_rto.core.closed_loop import make_closed_loop, run_closed_loop
-from kite_rto.core.laps import LapDetector
-from kite_rto.core.path import DEFAULT_SETPOINTS, FigureEightPath, Setpoints, ShapeBox, setpoints_from_shape
-from kite_rto.core.plant import PlantConfig
+from kite_rto.flight.closed_loop import make_closed_loop, run_closed_loop
+from kite_rto.flight.laps import LapDetector
+from kite_rto.flight.path import DEFAULT_SETPOINTS, FigureEightPath, Setpoints, ShapeBox, setpoints_from_shape
+from kite_rto.kite.plant import PlantConfig
 
 QUIET = PlantConfig().without_disturbances()
 

@@ -1,8 +1,8 @@
 """kite_rto.tools.compare_pure: a database the pure runner wrote compares equal; a changed cost does not."""
 import numpy as np
 
-from kite_rto.core.kite_rto import run_kite_rto
-from kite_rto.core.plant import PlantConfig
+from kite_rto.rto.session import run_kite_rto
+from kite_rto.kite.plant import PlantConfig
 from kite_rto.gma import HistoryStore
 from kite_rto.tools.compare_pure import compare_histories, main
 

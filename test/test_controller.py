@@ -6,11 +6,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from kite_rto.core.closed_loop import make_closed_loop, run_closed_loop
-from kite_rto.core.controller import ControllerSettings, PathController
-from kite_rto.core.params import KiteParams, ParameterError
-from kite_rto.core.path import DEFAULT_SETPOINTS, SetpointBox, SetpointError, Setpoints, ShapeBox
-from kite_rto.core.plant import PlantConfig, shared_model
+from kite_rto.flight.closed_loop import make_closed_loop, run_closed_loop
+from kite_rto.flight.controller import ControllerSettings, PathController
+from kite_rto.kite.params import KiteParams, ParameterError
+from kite_rto.flight.path import DEFAULT_SETPOINTS, SetpointBox, SetpointError, Setpoints, ShapeBox
+from kite_rto.kite.plant import PlantConfig, shared_model
 
 QUIET = PlantConfig().without_disturbances()
 

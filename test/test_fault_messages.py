@@ -16,11 +16,11 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
 from sensor_msgs.msg import JointState
 
-from kite_rto.core.closed_loop import make_closed_loop, run_closed_loop
-from kite_rto.core.experiment import ExperimentSpec
-from kite_rto.core.kite_rto import KiteRTOSettings, run_kite_rto
-from kite_rto.core.path import DEFAULT_SETPOINTS, Setpoints, setpoints_from_shape
-from kite_rto.core.plant import PlantConfig
+from kite_rto.flight.closed_loop import make_closed_loop, run_closed_loop
+from kite_rto.rto.experiment import ExperimentSpec
+from kite_rto.rto.session import KiteRTOSettings, run_kite_rto
+from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints, setpoints_from_shape
+from kite_rto.kite.plant import PlantConfig
 from kite_rto.gma import HistoryStore
 from kite_rto.nodes.common import LATCHED, RELIABLE_10, ns_to_stamp, stamp_to_ns
 
@@ -417,7 +417,7 @@ def test_bad_optimizer_inputs_keep_the_experiments_clean(probe, ros_env, request
 def test_sample_join_keeps_the_timeline():
     """The optimizer's join: lone junk parts never complete and are reported; only a complete sample stamped
     before the last one is a plant restart; a flood of junk cannot starve genuine samples."""
-    from kite_rto.nodes.sample_join import SampleJoin
+    from kite_rto.flight.sample_join import SampleJoin
 
     j = SampleJoin(max_pending=8)
 

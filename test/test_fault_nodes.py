@@ -14,15 +14,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kite_rto.core.path import setpoints_from_shape
-from kite_rto.core.closed_loop import make_closed_loop
-from kite_rto.core.controller import ControllerSettings
-from kite_rto.core.experiment import ExperimentSpec
-from kite_rto.core.kite_rto import KiteRTOSettings, RTOSession, make_kite_gma, run_kite_rto
-from kite_rto.core.path import Setpoints
+from kite_rto.flight.path import setpoints_from_shape
+from kite_rto.flight.closed_loop import make_closed_loop
+from kite_rto.flight.controller import ControllerSettings
+from kite_rto.rto.experiment import ExperimentSpec
+from kite_rto.rto.session import KiteRTOSettings, RTOSession, make_kite_gma, run_kite_rto
+from kite_rto.flight.path import Setpoints
 
 PER = KiteRTOSettings().experiments_per_iteration()   # experiments of one GMA iteration
-from kite_rto.core.plant import PlantConfig
+from kite_rto.kite.plant import PlantConfig
 from kite_rto.gma import HistoryStore
 
 from faultgraph import QUIET, SHORT, Watch, node, relay, stop_all, unsafe

@@ -5,12 +5,12 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from kite_rto.core.kite_ocp import (DEFAULT_C_LB, DEFAULT_C_UB, KiteOCPSettings, kite_model_problem,
+from kite_rto.rto.ocp import (DEFAULT_C_LB, DEFAULT_C_UB, KiteOCPSettings, kite_model_problem,
                                     path_guess, unpack)
-from kite_rto.core.kite_ocp_solve import realize_setpoints, solve_model_optimum
-from kite_rto.core.model import KiteModel
-from kite_rto.core.params import KiteParams, ParameterError
-from kite_rto.core.projection import project_samples
+from kite_rto.rto.ocp_solve import realize_setpoints, solve_model_optimum
+from kite_rto.kite.model import KiteModel
+from kite_rto.kite.params import KiteParams, ParameterError
+from kite_rto.flight.projection import project_samples
 
 DEG = math.pi / 180.0
 C_INTERIOR = np.array([28.0, 30.0, 7.0]) * DEG

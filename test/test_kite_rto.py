@@ -5,13 +5,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kite_rto.core.closed_loop import make_closed_loop, run_closed_loop
-from kite_rto.core.experiment import ExperimentEvaluator, ExperimentSpec
-from kite_rto.core.path import setpoints_from_shape
-from kite_rto.core.kite_rto import KiteRTOSettings, RTOSession, make_kite_gma, model_only_optimum, run_kite_rto
-from kite_rto.core.oracle import plant_performance
-from kite_rto.core.path import Setpoints
-from kite_rto.core.plant import Measurement, PlantConfig
+from kite_rto.flight.closed_loop import make_closed_loop, run_closed_loop
+from kite_rto.rto.experiment import ExperimentEvaluator, ExperimentSpec
+from kite_rto.flight.path import setpoints_from_shape
+from kite_rto.rto.session import KiteRTOSettings, RTOSession, make_kite_gma, model_only_optimum, run_kite_rto
+from kite_rto.rto.oracle import plant_performance
+from kite_rto.flight.path import Setpoints
+from kite_rto.kite.plant import Measurement, PlantConfig
 
 
 def _synthetic(t, period=10.0, crashes=0, wind=8.0, tension=5e5, z=150.0):
@@ -112,7 +112,7 @@ def test_session_repeats_a_crashed_experiment(quick_settings):
 
 
 def test_kite_privileged_directions_hold_theta_0_and_span_the_other_two():
-    from kite_rto.core.kite_rto import kite_directions
+    from kite_rto.rto.session import kite_directions
     d = kite_directions(KiteRTOSettings())
     # the model optimum is the box's lower corner; its theta_0 bound stays active under every deviation
     assert d.fixed.tolist() == [True, False, False]
@@ -125,7 +125,7 @@ def test_kite_privileged_directions_hold_theta_0_and_span_the_other_two():
 
 
 def test_a_directional_iteration_flies_the_nominal_and_one_experiment_per_direction(quick_settings):
-    from kite_rto.core.kite_rto import kite_directions
+    from kite_rto.rto.session import kite_directions
     quiet = PlantConfig().without_disturbances()
     res = run_kite_rto(quiet, seed=0, n_iter=1, settings=quick_settings)
     assert quick_settings.gradient == "directional" and quick_settings.experiments_per_iteration() == 3
@@ -148,6 +148,6 @@ def test_kite_rto_settings_reject_bad_values(bad, match):
 
 
 def test_model_uncertainty_rejects_zero_deviation():
-    from kite_rto.core.kite_dma import ModelUncertainty
+    from kite_rto.rto.directions import ModelUncertainty
     with pytest.raises(ValueError, match=r"ModelUncertainty.c_E = 0.0: expected a finite nonzero deviation"):
         ModelUncertainty(c_E=0.0)

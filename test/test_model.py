@@ -5,7 +5,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from kite_rto.core import KiteModel, KiteParams, ParameterError
+from kite_rto.kite import KiteModel, KiteParams, ParameterError
 
 MODEL = KiteModel()
 P = KiteParams()

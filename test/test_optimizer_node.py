@@ -6,10 +6,10 @@ import time
 import numpy as np
 import pytest
 
-from kite_rto.core.experiment import ExperimentSpec
-from kite_rto.core.kite_rto import KiteRTOSettings, run_kite_rto
-from kite_rto.core.plant import PlantConfig
-from kite_rto.core.path import setpoints_from_shape
+from kite_rto.rto.experiment import ExperimentSpec
+from kite_rto.rto.session import KiteRTOSettings, run_kite_rto
+from kite_rto.kite.plant import PlantConfig
+from kite_rto.flight.path import setpoints_from_shape
 from kite_rto.gma import HistoryStore
 
 from rosutil import Probe, start_node, stop

@@ -17,10 +17,10 @@ from rclpy.parameter import Parameter, parameter_value_to_python
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from kite_rto.core.controller import ControllerSettings, PathController
-from kite_rto.core.params import KiteParams, ParameterError
-from kite_rto.core.path import DEFAULT_SETPOINTS, Setpoints
-from kite_rto.core.plant import shared_model
+from kite_rto.flight.controller import ControllerSettings, PathController
+from kite_rto.kite.params import KiteParams, ParameterError
+from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints
+from kite_rto.kite.plant import shared_model
 from kite_rto.nodes.common import READ_ONLY, RELIABLE_10, ParamSpec, ns_to_stamp
 from kite_rto.tools.graph import node_command
 

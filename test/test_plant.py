@@ -5,9 +5,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kite_rto.core import KiteParams, ParameterError
-from kite_rto.core.plant import KitePlant, NoiseSettings, PlantConfig
-from kite_rto.core.wind import Turbulence, TurbulenceSettings
+from kite_rto.kite import KiteParams, ParameterError
+from kite_rto.kite.plant import KitePlant, NoiseSettings, PlantConfig
+from kite_rto.kite.wind import Turbulence, TurbulenceSettings
 
 
 def fly(plant, commands):

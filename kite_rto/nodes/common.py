@@ -25,7 +25,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 
-from ..core.params import ParameterError
+from ..kite.params import ParameterError
 
 __all__ = ["RELIABLE_10", "MEASUREMENTS", "LATCHED", "ParamSpec", "READ_ONLY", "declare_params", "stamp_to_ns", "ns_to_stamp",
            "finite_floats", "run_node", "request_exit", "MessageTemplate", "cdr_serialize", "joint_state_from_raw"]

@@ -5,7 +5,7 @@ gets the current setpoints); answers every ``/kite/state`` sample on ``/kite/ste
 (the lockstep handshake); publishes the reference path (nav_msgs/Path, for RViz/Foxglove) and per-lap statistics.
 With ``sync_optimizer:=true`` (lockstep) it answers a sample only after the optimizer's ``/rto/sync`` message for it
 and takes the setpoints from there, so a setpoint change takes effect at the same sample as in the pure runner.
-All computation is :class:`kite_rto.core.controller.PathController` and :class:`kite_rto.core.laps.LapDetector`.
+All computation is :class:`kite_rto.flight.controller.PathController` and :class:`kite_rto.flight.laps.LapDetector`.
 """
 from __future__ import annotations
 
@@ -21,14 +21,14 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from ..core.controller import ControllerSettings, PathController
-from ..core.laps import LapDetector
-from ..core.params import KiteParams, ParameterError
-from ..core.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, Setpoints, SetpointError
-from ..core.plant import shared_model
+from ..flight.controller import ControllerSettings, PathController
+from ..flight.laps import LapDetector
+from ..kite.params import KiteParams, ParameterError
+from ..flight.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, Setpoints, SetpointError
+from ..kite.plant import shared_model
 from .common import (LATCHED, MEASUREMENTS, RELIABLE_10, ParamSpec, declare_params, run_node,
                      stamp_to_ns)
-from .sample_join import MAX_STAMP_GAP_NS, POSITION_MAX, TENSION_MAX, WIND_MAX, RejectLog, state_values
+from ..flight.sample_join import MAX_STAMP_GAP_NS, POSITION_MAX, TENSION_MAX, WIND_MAX, RejectLog, state_values
 from .topics import LAPS, POSITION, REFERENCE_PATH, SETPOINTS, STATE, STEERING, SYNC, SYNC_NAMES, TENSION, WIND
 
 __all__ = ["ControllerNode", "PARAMS", "LAP_FIELDS", "main"]

@@ -1,6 +1,6 @@
 """Optimizer node: Generalized Modifier Adaptation on the flying kite.
 
-Drives :class:`kite_rto.core.kite_rto.RTOSession` (the same per-sample logic as the pure runner): subscribes the
+Drives :class:`kite_rto.rto.session.RTOSession` (the same per-sample logic as the pure runner): subscribes the
 plant's measurements (joined by stamp), runs GMA's nominal and perturbation experiments, publishes
 ``/rto/setpoints`` (reliable + transient-local) and ``/rto/status`` (diagnostic_msgs), and writes every finished
 experiment and iteration to an SQLite database, from which a restarted optimizer resumes.
@@ -24,13 +24,13 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
-from ..core.kite_rto import KiteRTOSettings, RTOSession, make_kite_gma
-from ..core.params import KiteParams, ParameterError
-from ..core.path import Setpoints, SetpointError, ShapeBox, setpoints_from_shape, validate_setpoints
+from ..rto.session import KiteRTOSettings, RTOSession, make_kite_gma
+from ..kite.params import KiteParams, ParameterError
+from ..flight.path import Setpoints, SetpointError, ShapeBox, setpoints_from_shape, validate_setpoints
 from ..gma import HistoryStore
 from .common import (LATCHED, MEASUREMENTS, RELIABLE_10, ParamSpec, declare_params, ns_to_stamp, request_exit,
                      run_node, stamp_to_ns)
-from .sample_join import POSITION_MAX, TENSION_MAX, WIND_MAX, RejectLog, SampleJoin, state_values
+from ..flight.sample_join import POSITION_MAX, TENSION_MAX, WIND_MAX, RejectLog, SampleJoin, state_values
 from .topics import CRASHES, POSITION, SETPOINTS, STATE, STATUS, SYNC, SYNC_NAMES, TENSION, WIND
 
 __all__ = ["OptimizerNode", "PARAMS", "main"]

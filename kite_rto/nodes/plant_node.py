@@ -19,12 +19,12 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
-from ..core.params import KiteParams
-from ..core.plant import PLANT_PARAMS, KitePlant, NoiseSettings, PlantConfig
-from ..core.wind import TurbulenceSettings
+from ..kite.params import KiteParams
+from ..kite.plant import PLANT_PARAMS, KitePlant, NoiseSettings, PlantConfig
+from ..kite.wind import TurbulenceSettings
 from .common import (LATCHED, MEASUREMENTS, RELIABLE_10, MessageTemplate, ParamSpec, declare_params, finite_floats, joint_state_from_raw,
                      request_exit, run_node, stamp_to_ns)
-from .sample_join import RejectLog
+from ..flight.sample_join import RejectLog
 from .topics import CLOCK, CRASHES, POSITION, STATE, STEERING, TENSION, WIND
 
 __all__ = ["PlantNode", "PARAMS", "main"]

@@ -1,7 +1,7 @@
 """Check a run of the ROS graph against the pure runner: same experiments, costs and iterates, bit for bit.
 
 The optimizer's SQLite database holds every experiment (setpoints, measured cost and constraint) and every
-iteration. This re-flies the same number of iterations with :func:`~kite_rto.core.kite_rto.run_kite_rto` on
+iteration. This re-flies the same number of iterations with :func:`~kite_rto.rto.session.run_kite_rto` on
 the default plant and settings (what the main job uses) with the given seed, and compares.
 
 Usage: ``python -m kite_rto.tools.compare_pure --db runs/demo/rto.sqlite [--seed 0]``; exit 0 when everything
@@ -15,8 +15,8 @@ import sys
 
 import numpy as np
 
-from ..core.kite_rto import run_kite_rto
-from ..core.plant import PlantConfig
+from ..rto.session import run_kite_rto
+from ..kite.plant import PlantConfig
 from ..gma import History, HistoryStore
 
 __all__ = ["compare_histories", "main"]

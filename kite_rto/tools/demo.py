@@ -181,7 +181,7 @@ def fly(args, env, out: Path, progress: Progress) -> dict:
 def report(args, res, out: Path) -> int:
     import numpy as np
 
-    from ..core.path import DEFAULT_SETPOINTS, FigureEightPath
+    from ..flight.path import DEFAULT_SETPOINTS, FigureEightPath
     from .rto_report import flight_report
 
     rec = res["recorder"]

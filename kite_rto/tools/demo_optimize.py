@@ -62,7 +62,7 @@ class OptimizeProgress:
 def optimize(args, env, out: Path, progress) -> int:
     import rclpy
 
-    from ..core.kite_rto import KiteRTOSettings
+    from ..rto.session import KiteRTOSettings
     from ..gma import HistoryStore
     from .demo import recorder_summary, ros_init, start_recorder
     from .recorder import Recorder

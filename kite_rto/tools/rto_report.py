@@ -22,9 +22,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..core.oracle import find_oracle, plant_performance
-from ..core.path import FigureEightPath, Setpoints, ShapeBox, setpoints_from_shape, shape_from_setpoints
-from ..core.plant import PlantConfig
+from ..rto.oracle import find_oracle, plant_performance
+from ..flight.path import FigureEightPath, Setpoints, ShapeBox, setpoints_from_shape, shape_from_setpoints
+from ..kite.plant import PlantConfig
 from ..gma import HistoryStore
 
 __all__ = ["judge_iterates", "write_report", "flight_report", "read_mcap", "history_from_mcap", "main"]
@@ -181,7 +181,7 @@ def _figures(history, rows, oracle, out: Path, samples, laps) -> None:
 def flight_report(samples, laps, out: Path, reference=None, label: str = "", extra: dict | None = None) -> dict:
     """Report of a flight without GMA: lap table, summary (after the first lap) and the flown path of the last
     60 s over ``reference`` = (theta, phi) arrays (rad) on the N-W plane (``path.png``); return the summary."""
-    from ..core.params import KiteParams
+    from ..kite.params import KiteParams
     from .plots import plot_paths
 
     t, theta, phi = samples

@@ -26,8 +26,8 @@ import math
 from collections import deque
 from dataclasses import dataclass, field, replace
 
-from .model import KiteModel
-from .params import KiteParams, check_range
+from ..kite.model import KiteModel
+from ..kite.params import KiteParams, check_range
 from .path import DEFAULT_TURN_MARGIN, FigureEightPath, SetpointBox, Setpoints, SetpointError, validate_setpoints
 
 __all__ = ["ControllerSettings", "ControllerStatus", "PathController", "SetpointError"]

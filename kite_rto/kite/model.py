@@ -2,7 +2,7 @@
 
 States ``x = (theta, phi, psi)`` in rad: angle between tether and the downwind x axis, azimuth, and kite
 orientation (psi = 0 flies towards the zenith). Input ``delta``: normalized steering deflection in [-1, 1].
-Parameters: the vector of :class:`~kite_rto.core.params.KiteParams` fields (``KiteParams.as_vector()``).
+Parameters: the vector of :class:`~kite_rto.kite.params.KiteParams` fields (``KiteParams.as_vector()``).
 
 The same :class:`KiteModel` object serves the plant simulation (numeric :class:`casadi.Function` objects),
 the controller (its inversion of psi') and the optimizer (symbolic expressions for the periodic OCP).

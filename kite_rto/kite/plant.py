@@ -63,7 +63,7 @@ class PlantConfig:
         substeps: RK4 steps per sample (>= 1).
         dead_time: steering dead time, s (>= 0; rounded to whole samples).
         rate_limit: steering rate limit, 1/s of normalized delta (> 0).
-        turbulence: :class:`~kite_rto.core.wind.TurbulenceSettings`.
+        turbulence: :class:`~kite_rto.kite.wind.TurbulenceSettings`.
         noise: :class:`NoiseSettings`.
         launch_state: (theta, phi, psi) in rad after start and after every crash.
     """
@@ -144,7 +144,7 @@ def _measurement(t, theta, phi, psi, theta_dot, phi_dot, psi_dot, tension, posit
 
 
 class _BlockTurbulence(Turbulence):
-    """:class:`~kite_rto.core.wind.Turbulence` with the per-sample cost of its random draws removed.
+    """:class:`~kite_rto.kite.wind.Turbulence` with the per-sample cost of its random draws removed.
 
     Same random stream, same draws in the same order, same floating-point operations, hence bit-for-bit the same
     gusts and anemometer readings; the normals are only drawn from the generator in blocks (a NumPy ``Generator``

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .params import check_range
+from ..kite.params import check_range
 from .projection import project_samples
 
 __all__ = ["LapStats", "LapDetector"]

@@ -22,7 +22,7 @@ from dataclasses import dataclass, fields
 import casadi as ca
 import numpy as np
 
-from .params import KiteParams
+from ..kite.params import KiteParams
 
 __all__ = ["Setpoints", "SetpointBox", "SetpointError", "FigureEightPath", "ClosestPoint", "ShapeBox",
            "shape_from_setpoints", "setpoints_from_shape", "validate_setpoints", "required_turn_radius",

@@ -36,10 +36,10 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from .model import KiteModel
-from .params import KiteParams, check_range
-from .path import setpoints_from_shape, shape_from_setpoints
-from .projection import project_samples
+from ..kite.model import KiteModel
+from ..kite.params import KiteParams, check_range
+from ..flight.path import setpoints_from_shape, shape_from_setpoints
+from ..flight.projection import project_samples
 
 try:
     from ..gma import ModelProblem

@@ -11,9 +11,9 @@ import numpy as np
 
 from .controller import ControllerSettings, PathController
 from .laps import LapDetector, LapStats
-from .params import KiteParams
+from ..kite.params import KiteParams
 from .path import DEFAULT_SETPOINTS, Setpoints
-from .plant import KitePlant, PlantConfig, shared_model
+from ..kite.plant import KitePlant, PlantConfig, shared_model
 
 __all__ = ["ClosedLoopResult", "run_closed_loop", "make_closed_loop"]
 

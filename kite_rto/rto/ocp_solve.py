@@ -1,7 +1,7 @@
 """Solve the kite's lap OCP directly (IPOPT): its own optimum, and its best way of flying given setpoints.
 
 These helpers serve tests, benchmarks and reports. The GMA library builds its own solvers from the
-:class:`~kite_rto.core.kite_ocp.KiteModelProblem`'s symbolic fields; these use the same fields, so both see
+:class:`~kite_rto.rto.ocp.KiteModelProblem`'s symbolic fields; these use the same fields, so both see
 the same model. Solvers are built once per problem and cached (keyed by the problem object's identity).
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from .kite_ocp import KiteModelProblem, path_guess, unpack
+from .ocp import KiteModelProblem, path_guess, unpack
 
 __all__ = ["OCPSolution", "OCPSolveError", "solve_model_optimum", "realize_setpoints"]
 

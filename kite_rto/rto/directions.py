@@ -20,9 +20,9 @@ from functools import lru_cache
 import numpy as np
 
 from ..gma import GMASettings, PrivilegedDirections, lagrangian_gradient, privileged_directions
-from .kite_ocp import KiteOCPSettings, kite_model_problem
-from .params import KiteParams, ParameterError
-from .path import ShapeBox
+from .ocp import KiteOCPSettings, kite_model_problem
+from ..kite.params import KiteParams, ParameterError
+from ..flight.path import ShapeBox
 
 __all__ = ["ModelUncertainty", "kite_privileged_directions"]
 

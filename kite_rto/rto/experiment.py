@@ -1,8 +1,8 @@
 """Plant experiments: hold setpoints ``c``, let the transient die out, average whole laps (SPEC §4).
 
-An :class:`ExperimentEvaluator` is fed one plant :class:`~kite_rto.core.plant.Measurement` at a time (from the
+An :class:`ExperimentEvaluator` is fed one plant :class:`~kite_rto.kite.plant.Measurement` at a time (from the
 plant directly in the pure runner, from topics in the ROS optimizer node). It detects laps with
-:class:`~kite_rto.core.laps.LapDetector`, drops the laps flown while the kite settles on the new path, and
+:class:`~kite_rto.flight.laps.LapDetector`, drops the laps flown while the kite settles on the new path, and
 once ``n_laps`` whole laps are in returns an :class:`ExperimentOutcome` in the units of the kite
 ``ModelProblem``: cost = minus the mean line tension in kN, constraint = ``h_min`` minus the minimum altitude
 over the averaged laps, in m.
@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .laps import LapDetector, LapStats
-from .params import KiteParams, check_range
+from ..flight.laps import LapDetector, LapStats
+from ..kite.params import KiteParams, check_range
 
 __all__ = ["ExperimentSpec", "ExperimentOutcome", "ExperimentEvaluator", "PlantFlight"]
 
@@ -193,11 +193,11 @@ class PlantFlight:
     applied with :meth:`PathController.set_setpoints`; crashed experiments are repeated.
 
     Args:
-        plant_config: :class:`~kite_rto.core.plant.PlantConfig`.
+        plant_config: :class:`~kite_rto.kite.plant.PlantConfig`.
         seed: plant seed.
         spec: :class:`ExperimentSpec`.
         c0: setpoints flown from launch (rad); default: the first ``fly`` request.
-        controller_settings: :class:`~kite_rto.core.controller.ControllerSettings`.
+        controller_settings: :class:`~kite_rto.flight.controller.ControllerSettings`.
     """
 
     def __init__(self, plant_config=None, seed: int = 0, spec: ExperimentSpec | None = None, c0=None,
@@ -212,8 +212,8 @@ class PlantFlight:
             self._launch(c0)
 
     def _launch(self, c) -> None:
-        from .closed_loop import make_closed_loop
-        from .path import Setpoints
+        from ..flight.closed_loop import make_closed_loop
+        from ..flight.path import Setpoints
         self.plant, self.controller = make_closed_loop(Setpoints.from_array(c), self.plant_config, self.seed,
                                                        self.controller_settings)
 
@@ -224,7 +224,7 @@ class PlantFlight:
 
     def fly(self, c, max_repeats: int = 3) -> ExperimentOutcome:
         """Apply setpoints ``c`` (rad) and return the outcome of the experiment (repeated after a crash)."""
-        from .path import Setpoints
+        from ..flight.path import Setpoints
         c = np.asarray(c, dtype=float)
         if self.plant is None:
             self._launch(c)
