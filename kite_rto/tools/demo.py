@@ -21,6 +21,12 @@ from pathlib import Path
 
 from . import graph
 from .graph import NodeProcess, close_graph, isolated_ros_env, stopped_by_signal
+from .progress import Progress, eta_text
+
+__all__ = ["parse_args", "fly", "report", "main"]
+
+# rclpy, the observer node, the report (matplotlib, the oracle) and the optimize mode are imported inside the
+# functions that run the graph: together about 1.5 s that `--help` and a mistyped option should not wait for.
 
 
 def parse_args(argv=None):
@@ -41,92 +47,11 @@ def parse_args(argv=None):
     return ap.parse_args(argv)
 
 
-class Progress:
-    """The live progress line: rewritten in place on a terminal, printed every ``every`` wall s otherwise.
-
-    :meth:`event` prints a permanent line (the live line is cleared first and redrawn on the next update).
-    """
-
-    def __init__(self, every: float = 10.0, stream=None):
-        self.stream = stream or sys.stdout
-        self.tty = self.stream.isatty()
-        self.every = every if not self.tty else 0.5
-        self._last = -math.inf
-        self._shown = False
-
-    def update(self, text: str, force: bool = False) -> None:
-        now = time.monotonic()
-        if not force and now - self._last < self.every:
-            return
-        self._last = now
-        if self.tty:
-            self.stream.write("\r" + text + "\x1b[K")
-            self._shown = True
-        else:
-            self.stream.write(text + "\n")
-        self.stream.flush()
-
-    def event(self, text: str) -> None:
-        self.clear()
-        self.stream.write(text + "\n")
-        self.stream.flush()
-
-    def clear(self) -> None:
-        if self._shown:
-            self.stream.write("\r\x1b[K")
-            self.stream.flush()
-            self._shown = False
-
-
-def eta_text(seconds) -> str:
-    """``ETA 1 min 05 s`` / ``ETA 42 s`` / ``ETA ?``."""
-    if seconds is None or not math.isfinite(seconds) or seconds < 0:
-        return "ETA ?"
-    seconds = round(seconds)
-    return f"ETA {seconds // 60} min {seconds % 60:02d} s" if seconds >= 60 else f"ETA {seconds} s"
-
-
-def ros_init() -> None:
-    """rclpy without its signal handlers: Ctrl-C raises KeyboardInterrupt here, and the demo stops the nodes."""
-    import rclpy
-    from rclpy.signals import SignalHandlerOptions
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-
-
-def start_recorder(args, log, env, rec, procs) -> int:
-    """With ``--record``: start kite_record as a process and wait until it listens; return the number of extra
-    /kite/state subscribers the plant must wait for (0 or 1)."""
-    if not args.record:
-        return 0
-    import rclpy
-
-    from ..nodes.topics import STATE
-    Path(args.record).resolve().parent.mkdir(parents=True, exist_ok=True)
-    before = rec.count_subscribers(STATE)
-    recorder = NodeProcess("record", log=log, env=env,
-                           cmd=[sys.executable, "-m", "kite_rto.tools.record", "--out", str(args.record)])
-    procs.append(recorder)
-    end = time.monotonic() + 60.0
-    while rec.count_subscribers(STATE) <= before and recorder.alive() and time.monotonic() < end:
-        rclpy.spin_once(rec, timeout_sec=0.1)
-    if not recorder.alive():
-        raise RuntimeError(f"the recorder exited (code {recorder.proc.returncode}): "
-                           + " | ".join(recorder.lines[-3:]))
-    print(f"  recording every topic to {args.record}", flush=True)
-    return 1
-
-
-def recorder_summary(procs) -> None:
-    for p in procs:
-        if p.name == "record":
-            said = [ln for ln in p.lines if "wrote" in ln]
-            print(f"  {said[-1].strip()}" if said else f"  the recorder said nothing; see nodes.log (exit code "
-                  f"{p.proc.returncode})", flush=True)
-
-
 def fly(args, env, out: Path, progress: Progress) -> dict:
     import rclpy
 
+    from ..nodes.topics import STEERING
+    from .demo_graph import plant_params, recorder_summary, ros_init, spin_until, start_recorder
     from .recorder import Recorder
 
     ros_init()
@@ -137,15 +62,11 @@ def fly(args, env, out: Path, progress: Progress) -> dict:
     code, interrupted = 1, False
     try:
         extra = start_recorder(args, log, env, rec, procs)
-        plant_params = {"duration": args.duration, "seed": args.seed, "wait_subscribers": 2 + extra}
-        if args.no_turbulence:
-            plant_params.update(turbulence=False, anemometer_noise=0.0, noise_angle_deg=0.0, noise_rate=0.0,
-                                noise_tension=0.0)
         ctrl = NodeProcess("controller", {}, log=log, env=env)
         procs.append(ctrl)
-        while rec.count_publishers("/kite/steering") == 0 and ctrl.alive() and time.monotonic() - wall0 < 60:
-            rclpy.spin_once(rec, timeout_sec=0.1)
-        plant = NodeProcess("plant", plant_params, log=log, env=env)
+        spin_until(lambda: rec.count_publishers(STEERING) > 0 or not ctrl.alive(), rec,
+                   60.0 - (time.monotonic() - wall0), period=0.1)
+        plant = NodeProcess("plant", plant_params(args, 2 + extra, duration=args.duration), log=log, env=env)
         procs.append(plant)
         fly0 = None
         while plant.alive():

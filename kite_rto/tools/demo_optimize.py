@@ -6,68 +6,24 @@ import re
 import time
 from pathlib import Path
 
+import rclpy
+
+from ..gma import HistoryStore
+from ..rto.session import KiteRTOSettings
+from .demo_graph import plant_params, recorder_summary, ros_init, spin_until, start_recorder
 from .graph import NodeProcess, close_graph, stopped_by_signal
+from .progress import OptimizeProgress
+from .recorder import Recorder
+from .rto_report import write_report
+
+__all__ = ["optimize"]
 
 _PROGRESS = re.compile(r"\[optimizer\]: (experiment|iteration|done|resumed|refusing|failed)(.*)")
 
 
-def _wait(pred, rec, timeout: float) -> bool:
-    import rclpy
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        rclpy.spin_once(rec, timeout_sec=0.05)
-    return pred()
-
-
-class OptimizeProgress:
-    """Progress of the GMA run from the optimizer's /rto/status: iteration k/N, experiment, ETA.
-
-    The ETA extrapolates the wall time per finished experiment of this run (experiments of earlier runs, when
-    resuming, do not count) to the experiments still to do; before the first one finishes it is unknown.
-    """
-
-    def __init__(self, n_iter: int, per_iteration: int):
-        self.n_iter = n_iter
-        self.per_iteration = per_iteration
-        self.done0 = None
-        self.t0 = None
-
-    def text(self, status: dict, sim_t: float, wall_flying: float) -> str:
-        try:
-            k = int(status.get("iteration", 0))
-            done = int(status.get("experiments_done", 0))
-        except ValueError:
-            k, done = 0, 0
-        if self.done0 is None and status:
-            self.done0, self.t0 = done, wall_flying
-        total = self.n_iter * self.per_iteration
-        in_iter = done - k * self.per_iteration
-        if k >= self.n_iter:
-            return f"  t = {sim_t:6.0f} s sim, all {self.n_iter} iterations done, finishing"
-        eta = None
-        if self.done0 is not None and done > self.done0:
-            per_exp = (wall_flying - self.t0) / (done - self.done0)
-            eta = per_exp * max(total - done, 0)
-        from .demo import eta_text
-        rate = sim_t / max(wall_flying, 1e-9)
-        exp = status.get("experiment", "")
-        return (f"  t = {sim_t:6.0f} s sim ({rate:4.1f}x real time), "
-                f"iteration {min(k + 1, self.n_iter)}/{self.n_iter}, "
-                f"experiment {min(max(in_iter, 0) + 1, self.per_iteration)}/{self.per_iteration}"
-                + (f" ({exp})" if exp else "") + f", {100.0 * done / max(total, 1):3.0f} % done, {eta_text(eta)}")
-
-
 def optimize(args, env, out: Path, progress) -> int:
-    import rclpy
-
-    from ..rto.session import KiteRTOSettings
-    from ..gma import HistoryStore
-    from .demo import recorder_summary, ros_init, start_recorder
-    from .recorder import Recorder
-    from .rto_report import write_report
-
+    """Run the GMA graph with the demo's ``args`` in ``env``, showing ``progress``; write the report to ``out``;
+    return the exit code (130 when interrupted)."""
     db = out / "rto.sqlite"
     if db.exists() and not args.resume:
         db.unlink()
@@ -83,23 +39,20 @@ def optimize(args, env, out: Path, progress) -> int:
     tracker = OptimizeProgress(args.iterations, KiteRTOSettings().experiments_per_iteration())
     try:
         extra = start_recorder(args, log, env, rec, procs)
-        plant_params = {"seed": args.seed, "wait_subscribers": 3 + extra}   # controller, optimizer, demo (+ recorder)
-        if args.no_turbulence:
-            plant_params.update(turbulence=False, anemometer_noise=0.0, noise_angle_deg=0.0, noise_rate=0.0,
-                                noise_tension=0.0)
         opt = NodeProcess("optimizer", {"db": str(db), "n_iter": args.iterations, "exit_when_done": True},
                           log=log, env=env)
         procs.append(opt)
         print("  starting the optimizer (builds the model's NLPs, ~10-30 s) ...", flush=True)
-        if not _wait(lambda: rec.setpoints or not opt.alive(), rec, 300):
+        if not spin_until(lambda: rec.setpoints or not opt.alive(), rec, 300):
             raise RuntimeError("the optimizer published no setpoints within 300 s")
         if not opt.alive():
             raise RuntimeError(f"the optimizer exited with code {opt.proc.returncode}; see {out / 'nodes.log'}")
         # Synchronized with the optimizer: the graph flies the same sequence as the pure runner (run_kite_rto).
         ctrl = NodeProcess("controller", {"sync_optimizer": True}, log=log, env=env)
         procs.append(ctrl)
-        _wait(lambda: any("new setpoints" in ln for ln in ctrl.lines) or not ctrl.alive(), rec, 120)
-        plant = NodeProcess("plant", plant_params, log=log, env=env)
+        spin_until(lambda: any("new setpoints" in ln for ln in ctrl.lines) or not ctrl.alive(), rec, 120)
+        plant = NodeProcess("plant", plant_params(args, 3 + extra),    # controller, optimizer, demo (+ recorder)
+                            log=log, env=env)
         procs.append(plant)
         shown = 0
         fly0 = None
