@@ -29,6 +29,7 @@ def _value(v) -> str:
 
 def node_params() -> tuple:
     """``(node name, ParamSpecs)`` of every node, in the order of the YAML file and the table."""
+    # Here, not on top: the nodes import rclpy, CasADi and the RTO session (~1.5 s) that `--help` need not wait for.
     from ..nodes import controller_node, echo_pilot, optimizer_node, plant_node
     return (("plant", plant_node.PARAMS), ("controller", controller_node.PARAMS),
             ("optimizer", optimizer_node.PARAMS), ("echo_pilot", echo_pilot.PARAMS))

@@ -13,6 +13,14 @@ import re
 import sys
 import time
 
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.utilities import remove_ros_args
+
+from .record import TOPICS, subscriber_qos, topic_type, type_name
+
 __all__ = ["to_yaml", "run_cli", "main"]
 
 _PLAIN = re.compile(r"^[A-Za-z_/][A-Za-z0-9_./ ()-]*$")
@@ -78,9 +86,6 @@ def run_cli(make_node, argv, done, duration: float = 0.0, poll: float = 0.1) -> 
     """Init rclpy with the ROS arguments in ``argv``, build ``make_node()``, spin until ``done()`` is true,
     ``duration`` (node-clock seconds, 0 = no limit) has passed, Ctrl-C or shutdown; return 0 (130 never: for a
     viewer Ctrl-C is the normal way out). Output that goes to a closed pipe ends the command quietly."""
-    import rclpy
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-
     rclpy.init(args=argv)
     node = None
     try:
@@ -110,7 +115,6 @@ def run_cli(make_node, argv, done, duration: float = 0.0, poll: float = 0.1) -> 
 
 
 def parse_args(argv):
-    from .record import TOPICS
     ap = argparse.ArgumentParser(prog="kite_echo", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("topic", nargs="?", help=f"one of: {', '.join(sorted(TOPICS))}")
@@ -124,10 +128,6 @@ def parse_args(argv):
 
 
 def main(argv=None) -> int:
-    from rclpy.utilities import remove_ros_args
-
-    from .record import TOPICS, subscriber_qos, topic_type, type_name
-
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(remove_ros_args(["kite_echo", *argv])[1:])
     if args.list or not args.topic:
@@ -153,8 +153,6 @@ def main(argv=None) -> int:
         seen[0] += 1
 
     def make_node():
-        from rclpy.node import Node
-        from rclpy.parameter import Parameter
         overrides = [Parameter("use_sim_time", value=True)] if args.use_sim_time else []
         node = Node("kite_echo", parameter_overrides=overrides)
         node.create_subscription(cls, args.topic, callback, subscriber_qos(args.topic, 100))

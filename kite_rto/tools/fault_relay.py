@@ -25,6 +25,16 @@ import random
 import sys
 import time
 
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.serialization import deserialize_message, serialize_message
+from rclpy.utilities import remove_ros_args
+from sensor_msgs.msg import JointState
+from std_msgs.msg import UInt32
+
+from ..nodes.common import LATCHED, RELIABLE_10, run_node, stamp_to_ns
+from ..nodes.topics import CRASHES, STATE
+
 __all__ = ["main", "parse_args", "message_type"]
 
 
@@ -76,15 +86,6 @@ def _wrap(a: float) -> float:
 
 
 def make_node(args):
-    from rclpy.clock import Clock, ClockType
-    from rclpy.node import Node
-    from rclpy.serialization import deserialize_message, serialize_message
-    from sensor_msgs.msg import JointState
-    from std_msgs.msg import UInt32
-
-    from ..nodes.common import LATCHED, RELIABLE_10, stamp_to_ns
-    from ..nodes.topics import CRASHES, STATE
-
     name = args.name or "fault_relay" + "".join(c if c.isalnum() else "_" for c in args.out)
 
     class FaultRelay(Node):
@@ -183,10 +184,6 @@ def make_node(args):
 
 
 def main(argv=None) -> int:
-    from rclpy.utilities import remove_ros_args
-
-    from ..nodes.common import run_node
-
     argv = sys.argv if argv is None else argv
     args = parse_args(remove_ros_args(argv)[1:])
     return run_node(lambda: make_node(args), argv, events=True)

@@ -1,6 +1,7 @@
 """Start kite_rto nodes as separate processes (no ROS launch system needed) and stop them cleanly."""
 from __future__ import annotations
 
+import ctypes
 import os
 import random
 import signal
@@ -23,7 +24,6 @@ _PR_SET_PDEATHSIG = 1
 def _prctl():
     """libc's prctl, looked up in the parent (the child between fork and exec must not import anything)."""
     try:
-        import ctypes
         return ctypes.CDLL(None, use_errno=True).prctl
     except (OSError, AttributeError):
         return None
@@ -157,7 +157,7 @@ def stopped_by_signal(exc: BaseException) -> bool:
 def close_graph(procs, node, log) -> None:
     """Stop the node processes (last started first), close their shared log, destroy the in-process observer
     ``node`` and shut rclpy down."""
-    import rclpy
+    import rclpy    # here, not on top: the demo imports this module before `--help` is answered (rclpy: ~0.4 s)
     stop_all(list(reversed(procs)))
     log.close()
     node.destroy_node()

@@ -21,6 +21,14 @@ import math
 import sys
 import time
 
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.utilities import remove_ros_args
+
+from ..nodes.topics import CRASHES, LAPS, SETPOINTS, STATUS
+from .echo import run_cli
+from .record import TOPICS, subscriber_qos
+
 __all__ = ["format_lap", "format_status", "format_iteration", "format_setpoints", "format_crash", "Monitor",
            "main"]
 
@@ -157,12 +165,6 @@ def parse_args(argv):
 
 
 def main(argv=None) -> int:
-    from rclpy.utilities import remove_ros_args
-
-    from ..nodes.topics import CRASHES, LAPS, SETPOINTS, STATUS
-    from .echo import run_cli
-    from .record import TOPICS, subscriber_qos
-
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(remove_ros_args(["kite_monitor", *argv])[1:])
     mon = Monitor()
@@ -182,8 +184,6 @@ def main(argv=None) -> int:
                 emit(mon.status_message({kv.key: kv.value for kv in st.values}))
 
     def make_node():
-        from rclpy.node import Node
-        from rclpy.parameter import Parameter
         overrides = [Parameter("use_sim_time", value=True)] if args.use_sim_time else []
         node = Node("kite_monitor", parameter_overrides=overrides)
         node.create_subscription(TOPICS[LAPS][0], LAPS,

@@ -25,6 +25,7 @@ def plot_paths(filename, flown: list, r: float, theta_bar: float, title: str = "
         flown: list of dicts with ``theta``, ``phi`` arrays (rad) of the flown samples, ``ref`` = (theta, phi)
             arrays of the reference path, and ``label``.
     """
+    # Not on import: choosing the Agg backend is a global change that only drawing a file should make.
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

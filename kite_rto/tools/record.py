@@ -25,14 +25,20 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
+from mcap.writer import CompressionType, Writer
+from mcap_ros2 import __version__ as MCAP_ROS2_VERSION
 from nav_msgs.msg import Path
-from rosgraph_msgs.msg import Clock
+from rclpy.clock import Clock as RclClock
+from rclpy.clock import ClockType
+from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.utilities import remove_ros_args
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
 from ..nodes import topics as T
-from ..nodes.common import LATCHED, MEASUREMENTS, RELIABLE_10
+from ..nodes.common import LATCHED, MEASUREMENTS, RELIABLE_10, request_exit, run_node
 
 __all__ = ["TOPICS", "topic_type", "type_name", "message_definition", "generated_definition", "qos_yaml",
            "McapRecording", "RecordNode", "main"]
@@ -192,16 +198,10 @@ class McapRecording:
     """
 
     def __init__(self, path, use_files: bool = True):
-        from mcap.writer import CompressionType, Writer
-
-        try:
-            from mcap_ros2 import __version__ as ros2_version
-        except ImportError:             # pragma: no cover - mcap-ros2-support is in requirements.txt
-            ros2_version = "?"
         self.path = str(path)
         self._file = open(self.path, "wb")
         self._writer = Writer(self._file, compression=CompressionType.ZSTD)
-        self._writer.start(profile="ros2", library=f"kite_rto record (mcap-ros2-support {ros2_version})")
+        self._writer.start(profile="ros2", library=f"kite_rto record (mcap-ros2-support {MCAP_ROS2_VERSION})")
         self._use_files = use_files
         self._schemas: dict = {}
         self.channels: dict = {}
@@ -267,12 +267,6 @@ class RecordNode:
 
 
 def _make_node(args):
-    from rclpy.clock import Clock as RclClock
-    from rclpy.clock import ClockType
-    from rclpy.node import Node
-
-    from ..nodes.common import request_exit
-
     class _Recorder(Node):
         def __init__(self):
             super().__init__("kite_record")
@@ -310,10 +304,6 @@ def parse_args(argv=None):
 
 
 def main(argv=None) -> int:
-    from rclpy.utilities import remove_ros_args
-
-    from ..nodes.common import run_node
-
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(remove_ros_args(["kite_record", *argv])[1:])
     unknown = [t for t in args.topics if t not in TOPICS]
