@@ -17,8 +17,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-import rclpy  # noqa: F401  SCRATCH: crosses the pure-core layer on purpose (reverted next commit)
-
 from .params import check_range
 
 __all__ = ["TurbulenceSettings", "Turbulence"]
