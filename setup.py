@@ -19,7 +19,6 @@ setup(
     maintainer_email="kite_rto@example.com",
     description="Real-time optimization of a crosswind power kite (GMA) as ROS 2 nodes",
     license="Apache-2.0",
-    tests_require=["pytest"],
     entry_points={
         "console_scripts": [
             "plant = kite_rto.nodes.plant_node:main",

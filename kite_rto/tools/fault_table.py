@@ -22,7 +22,9 @@ __all__ = ["load_rows", "markdown_table", "main"]
 FIELDS = ("fault", "injection", "outcome", "experiments_lost", "unsafe_setpoints", "passed")
 # Files in the order of the items (bad parameters, bad messages, node loss, message loss, crash, exposure)
 ORDER = ("param", "message", "node", "network", "loss", "crash", "exposure")
-DEFAULT_OUT = Path(__file__).resolve().parents[2] / "docs" / "faults.md"
+# Relative to the working directory (scripts/faults.sh runs from the clone's root), never to this file: an installed
+# package must not write next to itself in site-packages.
+DEFAULT_OUT = Path("docs") / "faults.md"
 
 
 def _rank(path: Path) -> tuple:
@@ -106,7 +108,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m kite_rto.tools.fault_table", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("folder", help="KITE_RTO_FAULT_LOG directory of the run")
-    ap.add_argument("--out", default=str(DEFAULT_OUT), help="Markdown file to write (default docs/faults.md)")
+    ap.add_argument("--out", default=str(DEFAULT_OUT),
+                    help="Markdown file to write (default docs/faults.md in the working directory)")
     ap.add_argument("--no-write", action="store_true", help="only print the table")
     ap.add_argument("--wall", type=float, default=None, help="wall time of the run, s (shown in the file)")
     ap.add_argument("--command", default="./scripts/faults.sh", help="command shown in the file")

@@ -66,7 +66,8 @@ def write_report(history, out: Path, config: PlantConfig | None = None, box: Sha
     box = box or ShapeBox()
     oracle = None
     if judge:
-        print("\ncomputing the oracle (direct optimization of the deterministic plant; cached in runs/) ...",
+        print("\ncomputing the oracle (direct optimization of the deterministic plant; cached in $KITE_RTO_CACHE or "
+              "the user cache directory) ...",
               flush=True)
         oracle = find_oracle(config, box)
         print(f"\noracle: c = {_deg(oracle.c)} deg, {oracle.tension_kn:.1f} kN, min altitude "
