@@ -11,13 +11,13 @@ def test_config_file_is_generated_from_the_declared_parameters():
         "regenerate: python -m kite_rto.tools.config_yaml > config/kite_rto.yaml"
 
 
-def test_readme_parameter_table_is_generated_from_the_declared_parameters():
-    from kite_rto.tools.config_yaml import README_BEGIN, README_END, render_markdown
-    text = (ROOT / "README.md").read_text()
-    assert text.count(README_BEGIN) == 1 and text.count(README_END) == 1
-    block = text[text.index(README_BEGIN) + len(README_BEGIN):text.index(README_END)]
+def test_docs_parameter_table_is_generated_from_the_declared_parameters():
+    from kite_rto.tools.config_yaml import TABLE_BEGIN, TABLE_END, render_markdown
+    text = (ROOT / "docs" / "parameters.md").read_text()
+    assert text.count(TABLE_BEGIN) == 1 and text.count(TABLE_END) == 1
+    block = text[text.index(TABLE_BEGIN) + len(TABLE_BEGIN):text.index(TABLE_END)]
     assert block == "\n" + render_markdown(), \
-        "regenerate: python -m kite_rto.tools.config_yaml --readme README.md"
+        "regenerate: python -m kite_rto.tools.config_yaml --doc docs/parameters.md"
 
 
 def test_parameter_table_lists_every_parameter_of_every_node():

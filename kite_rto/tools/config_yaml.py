@@ -1,8 +1,9 @@
-"""Render ``config/kite_rto.yaml`` and the README's parameter table from the nodes' declared parameters.
+"""Render ``config/kite_rto.yaml`` and the parameter table of ``docs/parameters.md`` from the nodes' declared
+parameters.
 
 One source of truth, the ``PARAMS`` of the nodes: ``python -m kite_rto.tools.config_yaml > config/kite_rto.yaml``;
-``python -m kite_rto.tools.config_yaml --markdown`` prints the table, ``--readme README.md`` rewrites the block
-between ``<!-- params:begin -->`` and ``<!-- params:end -->``. Tests check that both are up to date.
+``python -m kite_rto.tools.config_yaml --markdown`` prints the table, ``--doc docs/parameters.md`` rewrites the
+block between ``<!-- params:begin -->`` and ``<!-- params:end -->``. Tests check that both are up to date.
 """
 from __future__ import annotations
 
@@ -10,11 +11,10 @@ import argparse
 import sys
 from pathlib import Path
 
-__all__ = ["render", "render_markdown", "replace_readme_block", "node_params",
-           "README_BEGIN", "README_END"]
+__all__ = ["render", "render_markdown", "replace_table_block", "node_params", "TABLE_BEGIN", "TABLE_END"]
 
-README_BEGIN = "<!-- params:begin -->"
-README_END = "<!-- params:end -->"
+TABLE_BEGIN = "<!-- params:begin -->"
+TABLE_END = "<!-- params:end -->"
 
 
 def _value(v) -> str:
@@ -61,10 +61,10 @@ def render_markdown() -> str:
     return "\n".join(lines) + "\n"
 
 
-def replace_readme_block(text: str, table: str | None = None) -> str:
-    """``text`` with the block between the README markers replaced by the table (markers kept)."""
+def replace_table_block(text: str, table: str | None = None) -> str:
+    """``text`` (Markdown) with the block between the table markers replaced by the table (markers kept)."""
     table = render_markdown() if table is None else table
-    begin, end = text.index(README_BEGIN) + len(README_BEGIN), text.index(README_END)
+    begin, end = text.index(TABLE_BEGIN) + len(TABLE_BEGIN), text.index(TABLE_END)
     return text[:begin] + "\n" + table + text[end:]
 
 
@@ -72,11 +72,12 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     out = parser.add_mutually_exclusive_group()
     out.add_argument("--markdown", action="store_true", help="print the Markdown parameter table instead")
-    out.add_argument("--readme", metavar="FILE", help="rewrite the parameter table block of this README in place")
+    out.add_argument("--doc", metavar="FILE",
+                     help="rewrite the parameter table block of this Markdown file (docs/parameters.md) in place")
     args = parser.parse_args(argv)
-    if args.readme:
-        path = Path(args.readme)
-        path.write_text(replace_readme_block(path.read_text()))
+    if args.doc:
+        path = Path(args.doc)
+        path.write_text(replace_table_block(path.read_text()))
     else:
         sys.stdout.write(render_markdown() if args.markdown else render())
     return 0
