@@ -8,13 +8,14 @@ from .directional import DirectionalGradient, PrivilegedDirections, lagrangian_g
 from .gma import GMA, ModelRealization
 from .gradients import (FiniteDifferenceGradient, GradientEstimate, GradientEstimator, LeastSquaresGradient,
                         PlantPoint)
+from .modifiers import Decision, Modifiers
 from .offline import run_offline
 from .problem import ModelProblem
 from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
 from .settings import GMASettings
 from .store import HistoryStore
 
-__all__ = ["HistoryStore", "ModelProblem", "GMASettings", "GMA", "ModelRealization", "GradientEstimator", "GradientEstimate",
-           "PlantPoint", "FiniteDifferenceGradient", "LeastSquaresGradient", "DirectionalGradient",
+__all__ = ["HistoryStore", "ModelProblem", "GMASettings", "GMA", "ModelRealization", "Modifiers", "Decision",
+           "GradientEstimator", "GradientEstimate", "PlantPoint", "FiniteDifferenceGradient", "LeastSquaresGradient", "DirectionalGradient",
            "PrivilegedDirections", "privileged_directions", "lagrangian_gradient", "ExperimentRequest",
            "ExperimentResult", "IterationRecord", "History", "run_offline"]
