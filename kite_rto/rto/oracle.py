@@ -2,7 +2,7 @@
 
 :func:`plant_performance` flies setpoints ``c`` on the plant with turbulence and noise off, from launch, and
 averages whole laps after the transient. :func:`find_oracle` maximizes the mean tension over the optimizer's
-:class:`~kite_rto.flight.path.ShapeBox` subject to ``min altitude >= h_min``: a coarse grid, then Nelder–Mead
+:class:`~kite_rto.flight.shape.ShapeBox` subject to ``min altitude >= h_min``: a coarse grid, then Nelder–Mead
 (box-normalized shape coordinates, clipped,
 with a penalty on altitude violation) from the best grid points. Results are cached in
 ``runs/oracle_<hash>.json`` keyed by the plant configuration, the box and the evaluation settings.
@@ -19,7 +19,7 @@ from dataclasses import dataclass, asdict
 import numpy as np
 
 from .experiment import ExperimentSpec, PlantFlight
-from ..flight.path import ShapeBox
+from ..flight.shape import ShapeBox
 from ..kite.plant import PlantConfig
 
 __all__ = ["OracleResult", "plant_performance", "find_oracle", "DEFAULT_CACHE_DIR"]

@@ -62,7 +62,7 @@ class OptimizeProgress:
 def optimize(args, env, out: Path, progress) -> int:
     import rclpy
 
-    from ..rto.session import KiteRTOSettings
+    from ..rto.settings import KiteRTOSettings
     from ..gma import HistoryStore
     from .demo import recorder_summary, ros_init, start_recorder
     from .recorder import Recorder
@@ -95,7 +95,7 @@ def optimize(args, env, out: Path, progress) -> int:
             raise RuntimeError("the optimizer published no setpoints within 300 s")
         if not opt.alive():
             raise RuntimeError(f"the optimizer exited with code {opt.proc.returncode}; see {out / 'nodes.log'}")
-        # Synchronized with the optimizer: the graph flies the same sequence as the pure runner (run_kite_rto).
+        # Synchronized with the optimizer: the graph flies the same sequence as the pure runner (run_rto).
         ctrl = NodeProcess("controller", {"sync_optimizer": True}, log=log, env=env)
         procs.append(ctrl)
         _wait(lambda: any("new setpoints" in ln for ln in ctrl.lines) or not ctrl.alive(), rec, 120)

@@ -23,7 +23,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..rto.oracle import find_oracle, plant_performance
-from ..flight.path import FigureEightPath, Setpoints, ShapeBox, setpoints_from_shape, shape_from_setpoints
+from ..flight.path import FigureEightPath, Setpoints
+from ..flight.shape import ShapeBox, setpoints_from_shape, shape_from_setpoints
 from ..kite.plant import PlantConfig
 from ..gma import HistoryStore
 
