@@ -2,7 +2,8 @@
 
 GMA starts at the model-only optimum on the default plant (turbulence and noise on). Every iterate c_k is
 re-flown on the deterministic plant (turbulence and noise off); the target is >= 99 % of the oracle's mean
-tension (``kite_rto.rto.oracle.find_oracle``, cached under runs/) with min altitude >= h_min - 2 m. The
+tension (``kite_rto.rto.oracle.find_oracle``, cached in ``$KITE_RTO_CACHE`` or the user cache directory) with
+min altitude >= h_min - 2 m. The
 baselines (model-only, model-free finite-difference ascent, Nelder-Mead on the plant) get the same plant
 seed and the same experiment spec, and a flight-time budget of ``--budget`` times the flight time GMA needed
 to reach 99 % on that seed (its whole flight time if it did not); a baseline stops as soon as a candidate
