@@ -118,9 +118,6 @@ class SetpointBox:
         """The 8 corners of the box."""
         return [Setpoints(a, b, c) for a in self.theta_0 for b in self.A_phi for c in self.A_theta]
 
-    def centre(self) -> Setpoints:
-        return Setpoints.from_array((self.lower() + self.upper()) / 2)
-
 
 @dataclass(frozen=True)
 class ClosestPoint:
@@ -154,10 +151,6 @@ class FigureEightPath:
         if isinstance(s, np.ndarray):
             return self._t0 + self._at * np.sin(2 * s), self._ap * np.sin(s)
         return self._t0 + self._at * math.sin(2 * s), self._ap * math.sin(s)
-
-    def derivative(self, s: float):
-        """``(d theta/ds, d phi/ds)``."""
-        return 2 * self._at * math.cos(2 * s), self._ap * math.cos(s)
 
     def _local(self, s: float):
         """north/east components of dP/ds and d2P/ds2 (second derivative of the components)."""
@@ -226,10 +219,6 @@ class FigureEightPath:
             lam = -k * math.cos(chi) + math.sqrt(max(1.0 - (k * math.sin(chi)) ** 2, 0.0))
             worst = max(worst, abs(self.curvature(si)) * lam)
         return r / worst
-
-    def length(self, n: int = 720) -> float:
-        """Arc length of one lap, rad (times r for metres)."""
-        return float(sum(self.speed(si) for si in np.arange(n) * (TWO_PI / n)) * TWO_PI / n)
 
     # --- closest point -------------------------------------------------------------------------
     def _residual(self, s: float, theta: float, phi: float):
