@@ -15,35 +15,12 @@ import numpy as np
 
 from ._nlp import ModifiedNLP, RealizationNLP
 from .gradients import FiniteDifferenceGradient, GradientEstimate, GradientEstimator, PlantPoint
-from .modifiers import Decision, Modifiers
+from .modifiers import Decision, ModelRealization, Modifiers
 from .problem import ModelProblem
 from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
 from .settings import GMASettings, per_setpoint
 
-__all__ = ["GMA", "ModelRealization"]
-
-
-@dataclass
-class ModelRealization:
-    """The model's point for setpoints ``c`` and its gradients with respect to ``c``.
-
-    Attributes:
-        u: model decision vector (n_u,).
-        phi: model cost there.
-        g: model constraints (n_g,).
-        grad_phi: ``d phi_hat / d c`` (n_c,).
-        jac_g: ``d g_hat / d c`` (n_g, n_c).
-        success: the model solve succeeded (otherwise ``g``, ``grad_phi``, ``jac_g`` are NaN).
-        status: the solver's status text.
-    """
-
-    u: np.ndarray
-    phi: float
-    g: np.ndarray
-    grad_phi: np.ndarray
-    jac_g: np.ndarray
-    success: bool
-    status: str
+__all__ = ["GMA"]
 
 
 @dataclass

@@ -1,4 +1,4 @@
-"""What a GMA iteration computes from the plant data: the modifiers, and what it decided to do with them."""
+"""What a GMA iteration computes: the model's point, the modifiers (plant minus model) and the decision."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -6,7 +6,30 @@ from enum import StrEnum
 
 import numpy as np
 
-__all__ = ["Modifiers", "Decision"]
+__all__ = ["ModelRealization", "Modifiers", "Decision"]
+
+
+@dataclass
+class ModelRealization:
+    """The model's point for setpoints ``c`` and its gradients with respect to ``c``.
+
+    Attributes:
+        u: model decision vector (n_u,).
+        phi: model cost there.
+        g: model constraints (n_g,).
+        grad_phi: ``d phi_hat / d c`` (n_c,).
+        jac_g: ``d g_hat / d c`` (n_g, n_c).
+        success: the model solve succeeded (otherwise ``g``, ``grad_phi``, ``jac_g`` are NaN).
+        status: the solver's status text.
+    """
+
+    u: np.ndarray
+    phi: float
+    g: np.ndarray
+    grad_phi: np.ndarray
+    jac_g: np.ndarray
+    success: bool
+    status: str
 
 
 @dataclass

@@ -30,7 +30,8 @@ class RTOResult:
     Attributes:
         records: every :class:`IterationRecord`.
         experiments: every :class:`~kite_rto.rto.session.ExperimentLog`.
-        iterates: setpoints c_0, c_1, ..., c_K (rad), shape (K + 1, 3); c_{k+1} = setpoints_from_shape(records[k].c_next).
+        iterates: setpoints c_0, c_1, ..., c_K (rad), shape (K + 1, 3);
+            c_{k+1} = setpoints_from_shape(records[k].c_next).
         iterate_times: flight time (s) at which each iterate became available (0 for c_0).
         flight_time: total simulated flight time, s.
         crashes: plant crashes during the run.
