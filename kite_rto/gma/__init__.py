@@ -17,5 +17,5 @@ from .store import HistoryStore
 
 __all__ = ["HistoryStore", "ModelProblem", "GMASettings", "GMA", "ModelRealization", "Modifiers", "Decision",
            "GradientEstimator", "GradientEstimate", "PlantPoint", "FiniteDifferenceGradient", "LeastSquaresGradient",
-           "DirectionalGradient", "PrivilegedDirections", "privileged_directions", "lagrangian_gradient", "ExperimentRequest",
-           "ExperimentResult", "IterationRecord", "History", "run_offline"]
+           "DirectionalGradient", "PrivilegedDirections", "privileged_directions", "lagrangian_gradient",
+           "ExperimentRequest", "ExperimentResult", "IterationRecord", "History", "run_offline"]
