@@ -2,10 +2,10 @@
 
 Run: ``python benchmarks/bench_ocp.py [--repeats 10]``. Rows:
 
-* build: ``kite_model_problem`` (symbolic graph) and the first ``nlpsol`` (derivative generation);
+* build: ``model_problem`` (symbolic graph) and the first ``nlpsol`` (derivative generation);
 * cold: model optimum from ``u0``; realization of an interior setpoint from its figure-eight guess;
 * optimizer start-up: DMA's privileged directions (one realization NLP per uncertain parameter, with the
-  shape-box model optimum) and then :func:`make_kite_gma` (GMA's NLPs), once each, cold;
+  shape-box model optimum) and then :func:`make_gma` (GMA's NLPs), once each, cold;
 * warm: median over ``repeats`` re-solves after a small change (setpoints moved ~0.5 deg; or the model
   optimum with small random GMA modifiers ``lambda^T (y - c_k)``, ``eps + mu^T (y - c_k)``, which is the
   problem the GMA optimizer solves each iteration), each warm-started from the unmodified solution.
@@ -19,9 +19,10 @@ import time
 import casadi as ca
 import numpy as np
 
-from kite_rto.rto.ocp import kite_model_problem
+from kite_rto.rto.ocp import model_problem
 from kite_rto.rto.ocp_solve import realize_setpoints, solve_model_optimum
-from kite_rto.rto.session import KiteRTOSettings, kite_directions, make_kite_gma
+from kite_rto.rto.settings import KiteRTOSettings
+from kite_rto.rto.builder import gma_directions, make_gma
 
 DEG = math.pi / 180.0
 WARM = {"print_level": 0, "sb": "yes", "tol": 1e-8, "warm_start_init_point": "yes", "mu_init": 1e-4}
@@ -41,7 +42,7 @@ def _modified_solver(pr):
 def main(repeats: int = 10):
     rows = []
     t0 = time.perf_counter()
-    pr = kite_model_problem()
+    pr = model_problem()
     rows.append(("build ModelProblem (symbolic)", time.perf_counter() - t0, "", ""))
     t0 = time.perf_counter()
     opt = solve_model_optimum(pr)
@@ -72,12 +73,12 @@ def main(repeats: int = 10):
 
     settings = KiteRTOSettings()
     t0 = time.perf_counter()
-    d = kite_directions(settings)
+    d = gma_directions(settings)
     rows.append(("start-up: DMA privileged directions (cold)", time.perf_counter() - t0, "",
                  f"{len(settings.uncertainty.names())} parameters, {d.directions.shape[1]} directions"))
     t0 = time.perf_counter()
-    make_kite_gma(settings)
-    rows.append(("start-up: make_kite_gma after that (GMA's NLPs)", time.perf_counter() - t0, "", ""))
+    make_gma(settings)
+    rows.append(("start-up: make_gma after that (GMA's NLPs)", time.perf_counter() - t0, "", ""))
 
     print(f"kite lap OCP: N = {pr.settings.n_intervals}, substeps = {pr.settings.substeps}, n_u = {pr.n_u}")
     print(f"model optimum: c = {np.round(opt.c / DEG, 2)} deg, mean tension {opt.mean_tension_kn:.1f} kN, "

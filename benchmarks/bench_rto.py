@@ -2,7 +2,8 @@
 
 GMA starts at the model-only optimum on the default plant (turbulence and noise on). Every iterate c_k is
 re-flown on the deterministic plant (turbulence and noise off); the target is >= 99 % of the oracle's mean
-tension (``kite_rto.rto.oracle.find_oracle``, cached under runs/) with min altitude >= h_min - 2 m. The
+tension (``kite_rto.rto.oracle.find_oracle``, cached in ``$KITE_RTO_CACHE`` or the user cache directory) with
+min altitude >= h_min - 2 m. The
 baselines (model-only, model-free finite-difference ascent, Nelder-Mead on the plant) get the same plant
 seed and the same experiment spec, and a flight-time budget of ``--budget`` times the flight time GMA needed
 to reach 99 % on that seed (its whole flight time if it did not); a baseline stops as soon as a candidate
@@ -23,7 +24,9 @@ from dataclasses import replace
 import numpy as np
 
 from kite_rto.rto.baselines import finite_difference_ascent, model_only, nelder_mead_plant, time_to_target
-from kite_rto.rto.session import KiteRTOSettings, kite_directions, model_only_optimum, run_kite_rto
+from kite_rto.rto.settings import KiteRTOSettings
+from kite_rto.rto.builder import gma_directions, model_only_optimum
+from kite_rto.rto.runner import run_rto
 from kite_rto.rto.oracle import find_oracle, plant_performance
 from kite_rto.kite.plant import PlantConfig
 
@@ -45,7 +48,7 @@ def main(argv=None) -> int:
                     choices=("directional", "forward", "central", "least_squares"), help="GMA's plant gradient")
     ap.add_argument("--n-directions", type=int, default=KiteRTOSettings().n_directions,
                     help="privileged directions (gradient directional)")
-    ap.add_argument("--backoff", type=float, default=KiteRTOSettings().backoff,
+    ap.add_argument("--backoff", type=float, default=KiteRTOSettings().gma.backoff,
                     help="GMA's altitude back-off, m")
     ap.add_argument("--first-seed", type=int, default=0, help="seeds first-seed .. first-seed + seeds - 1")
     args = ap.parse_args(argv)
@@ -56,17 +59,19 @@ def main(argv=None) -> int:
     if args.anemometer_correlation is not None:
         config = replace(config, turbulence=replace(config.turbulence,
                                                     anemometer_correlation=args.anemometer_correlation))
-    settings = KiteRTOSettings(gradient=args.gradient, n_directions=args.n_directions, backoff=args.backoff)
+    settings = KiteRTOSettings(gradient=args.gradient, n_directions=args.n_directions).with_gma(backoff=args.backoff)
     oracle = find_oracle(config, settings.box)
     target = 0.99 * oracle.tension_kn
-    c0, t_model, _ = model_only_optimum(settings.box)
+    opt = model_only_optimum(settings.box)
+    c0, t_model = opt.c, opt.mean_tension_kn
     t0, z0 = plant_performance(config, c0)
     print(f"bench_rto: {args.seeds} seeds x {args.iters} GMA iterations, plant default (turbulence on, anemometer "
           f"correlation {config.turbulence.anemometer_correlation:g}), experiment {settings.experiment.n_laps} laps "
-          f"+ 1 settle lap, gradient {settings.gradient} fd_step {settings.fd_step} back-off {settings.backoff:g} m; "
+          f"+ 1 settle lap, gradient {settings.gradient} fd_step {settings.fd_step} "
+          f"back-off {settings.gma.backoff:g} m; "
           f"baselines get {args.budget:g}x GMA's time to 99 %")
     if settings.gradient == "directional":
-        d = kite_directions(settings)
+        d = gma_directions(settings)
         dirs = "; ".join("(" + ", ".join(f"{v:+.3f}" for v in col) + ")" for col in d.scaled.T)
         print(f"privileged directions (theta_0, A_phi, aspect in box widths): {dirs}; held at a robustly active "
               f"bound: {[n for n, f in zip(('theta_0', 'A_phi', 'aspect'), d.fixed) if f]}; singular values "
@@ -85,7 +90,7 @@ def main(argv=None) -> int:
         tension, z = plant_performance(config, c)
         return tension >= target and z >= 100.0 - 2.0
     for seed in range(args.first_seed, args.first_seed + args.seeds):
-        res = run_kite_rto(config, seed, args.iters, settings)
+        res = run_rto(config, seed, args.iters, settings)
         k, t = time_to_target(res.iterates, res.iterate_times, config, target)
         tf, zf = plant_performance(config, res.iterates[-1])
         ok = [reached(c) for c in res.iterates]

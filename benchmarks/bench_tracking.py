@@ -14,7 +14,8 @@ import time
 import numpy as np
 
 from kite_rto.flight.closed_loop import make_closed_loop, run_closed_loop
-from kite_rto.flight.path import DEFAULT_SETPOINTS, FigureEightPath, Setpoints, ShapeBox, setpoints_from_shape
+from kite_rto.flight.path import DEFAULT_SETPOINTS, FigureEightPath, Setpoints
+from kite_rto.flight.shape import ShapeBox, setpoints_from_shape
 from kite_rto.kite.plant import PlantConfig
 
 TARGETS = {"disturbed": 1.5, "quiet": 0.5}

@@ -6,7 +6,8 @@ import pytest
 
 from kite_rto.flight.closed_loop import make_closed_loop, run_closed_loop
 from kite_rto.flight.laps import LapDetector
-from kite_rto.flight.path import DEFAULT_SETPOINTS, FigureEightPath, Setpoints, ShapeBox, setpoints_from_shape
+from kite_rto.flight.path import DEFAULT_SETPOINTS, FigureEightPath, Setpoints
+from kite_rto.flight.shape import ShapeBox, setpoints_from_shape
 from kite_rto.kite.plant import PlantConfig
 
 QUIET = PlantConfig().without_disturbances()

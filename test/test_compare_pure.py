@@ -1,14 +1,14 @@
 """kite_rto.tools.compare_pure: a database the pure runner wrote compares equal; a changed cost does not."""
 import numpy as np
 
-from kite_rto.rto.session import run_kite_rto
+from kite_rto.rto.runner import run_rto
 from kite_rto.kite.plant import PlantConfig
 from kite_rto.gma import HistoryStore
 from kite_rto.tools.compare_pure import compare_histories, main
 
 
 def test_pure_database_compares_identical_and_a_changed_cost_is_found(tmp_path, capsys):
-    res = run_kite_rto(PlantConfig(), seed=2, n_iter=1)
+    res = run_rto(PlantConfig(), seed=2, n_iter=1)
     db = tmp_path / "rto.sqlite"
     store = HistoryStore(str(db))
     store.save_history(res.history)

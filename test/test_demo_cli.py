@@ -87,7 +87,7 @@ def start_demo(args, env):
 
 
 def test_progress_line_of_the_optimization():
-    from kite_rto.rto.session import KiteRTOSettings
+    from kite_rto.rto.settings import KiteRTOSettings
     from kite_rto.tools.progress import OptimizeProgress, eta_text
 
     per = {g: KiteRTOSettings(gradient=g).experiments_per_iteration() for g in ("forward", "central", "directional")}

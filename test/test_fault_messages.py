@@ -18,8 +18,10 @@ from sensor_msgs.msg import JointState
 
 from kite_rto.flight.closed_loop import make_closed_loop, run_closed_loop
 from kite_rto.rto.experiment import ExperimentSpec
-from kite_rto.rto.session import KiteRTOSettings, run_kite_rto
-from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints, setpoints_from_shape
+from kite_rto.rto.settings import KiteRTOSettings
+from kite_rto.rto.runner import run_rto
+from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints
+from kite_rto.flight.shape import setpoints_from_shape
 from kite_rto.kite.plant import PlantConfig
 from kite_rto.gma import HistoryStore
 from kite_rto.nodes.common import LATCHED, RELIABLE_10, ns_to_stamp, stamp_to_ns
@@ -385,7 +387,7 @@ def test_bad_optimizer_inputs_keep_the_experiments_clean(probe, ros_env, request
         finally:
             store.close()
         settings = KiteRTOSettings(experiment=ExperimentSpec(n_laps=1, settle_laps=0))
-        pure = run_kite_rto(PlantConfig().without_disturbances(), seed=0, n_iter=1, settings=settings)
+        pure = run_rto(PlantConfig().without_disturbances(), seed=0, n_iter=1, settings=settings)
         ros_c = np.array([setpoints_from_shape(q.c) for q, _ in history.experiments])   # GMA: shape coordinates
         pure_c = np.array([e.c for e in pure.experiments])
         ids = [q.request_id for q, _ in history.experiments]

@@ -14,11 +14,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kite_rto.flight.path import setpoints_from_shape
+from kite_rto.flight.shape import setpoints_from_shape
 from kite_rto.flight.closed_loop import make_closed_loop
 from kite_rto.flight.controller import ControllerSettings
 from kite_rto.rto.experiment import ExperimentSpec
-from kite_rto.rto.session import KiteRTOSettings, RTOSession, make_kite_gma, run_kite_rto
+from kite_rto.rto.settings import KiteRTOSettings
+from kite_rto.rto.session import RTOSession
+from kite_rto.rto.builder import make_gma
+from kite_rto.rto.runner import run_rto
 from kite_rto.flight.path import Setpoints
 
 PER = KiteRTOSettings().experiments_per_iteration()   # experiments of one GMA iteration
@@ -43,7 +46,7 @@ def probe():
 @pytest.fixture(scope="module")
 def pure():
     """The fault-free pure runner's iteration: the experiment list every faulty run must end with."""
-    return run_kite_rto(PlantConfig().without_disturbances(), seed=0, n_iter=1, settings=SETTINGS)
+    return run_rto(PlantConfig().without_disturbances(), seed=0, n_iter=1, settings=SETTINGS)
 
 
 def stored(db):
@@ -228,7 +231,7 @@ def test_kite_crash_discards_and_repeats_the_experiment_pure(request):
     with fault_row(request, "kite crash (pure runner, RTOSession)",
                    "from t = 20 s a faulty pilot steers to psi = pi until the kite crashes (same law as "
                    "fault_relay --dive-at)") as row:
-        gma = make_kite_gma(SETTINGS)
+        gma = make_gma(SETTINGS)
         session = RTOSession(gma, SETTINGS.experiment, SETTINGS.max_repeats)
         c0 = Setpoints.from_array(setpoints_from_shape(gma.next_request().c))   # GMA works in shape coordinates
         plant, controller = make_closed_loop(c0, PlantConfig().without_disturbances(), seed=0,
@@ -236,7 +239,7 @@ def test_kite_crash_discards_and_repeats_the_experiment_pure(request):
         m = plant.measure()
         new = session.start(m.t)
         crash_t = None
-        while not gma.records and not session.failed and m.t < 600:
+        while not gma.records and not session.stopped and m.t < 600:
             if new is not None:
                 controller.set_setpoints(Setpoints.from_array(new))
             delta = controller.command(m)
@@ -254,7 +257,7 @@ def test_kite_crash_discards_and_repeats_the_experiment_pure(request):
         row.outcome = (f"crash at t = {crash_t:.1f} s counted ({m.crashes}) and relaunched; the experiment in "
                        f"progress was discarded and repeated ({logs[0].repeats} repeat, measured again from "
                        f"t = {stored_t[0]:.1f} s); the iteration completed with {len(logs)} distinct experiments")
-        assert m.crashes == 1 and crash_t is not None and not session.failed and len(gma.records) == 1
+        assert m.crashes == 1 and crash_t is not None and not session.stopped and len(gma.records) == 1
         assert [e.repeats for e in logs] == [1] + [0] * (PER - 1) and len(set(ids)) == PER
         assert stored_t[0] >= crash_t and row.experiments_lost == 0 and row.unsafe_setpoints == 0
 

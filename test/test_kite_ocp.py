@@ -5,7 +5,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from kite_rto.rto.ocp import (DEFAULT_C_LB, DEFAULT_C_UB, KiteOCPSettings, kite_model_problem,
+from kite_rto.rto.ocp import (DEFAULT_C_LB, DEFAULT_C_UB, KiteOCPSettings, model_problem,
                                     path_guess, unpack)
 from kite_rto.rto.ocp_solve import realize_setpoints, solve_model_optimum
 from kite_rto.kite.model import KiteModel
@@ -18,7 +18,7 @@ C_INTERIOR = np.array([28.0, 30.0, 7.0]) * DEG
 
 @pytest.fixture(scope="module")
 def problem():
-    return kite_model_problem()
+    return model_problem()
 
 
 @pytest.fixture(scope="module")
@@ -128,7 +128,7 @@ def test_settings_validate(kwargs):
 
 
 def test_other_params_build(problem):
-    other = kite_model_problem(KiteParams(E=4.6, g_s=0.035), KiteOCPSettings(n_intervals=24, delta_max=1.0))
+    other = model_problem(KiteParams(E=4.6, g_s=0.035), KiteOCPSettings(n_intervals=24, delta_max=1.0))
     assert other.n_u == 4 * 24 + 1
     phi, g, y = other.evaluate(other.u0)
     assert np.isfinite(phi) and np.all(np.isfinite(g)) and np.all(np.isfinite(y))

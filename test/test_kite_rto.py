@@ -7,8 +7,11 @@ import pytest
 
 from kite_rto.flight.closed_loop import make_closed_loop, run_closed_loop
 from kite_rto.rto.experiment import ExperimentEvaluator, ExperimentSpec
-from kite_rto.flight.path import setpoints_from_shape
-from kite_rto.rto.session import KiteRTOSettings, RTOSession, make_kite_gma, model_only_optimum, run_kite_rto
+from kite_rto.flight.shape import setpoints_from_shape
+from kite_rto.rto.settings import KiteRTOSettings
+from kite_rto.rto.session import RTOSession
+from kite_rto.rto.builder import make_gma, model_only_optimum
+from kite_rto.rto.runner import run_rto
 from kite_rto.rto.oracle import plant_performance
 from kite_rto.flight.path import Setpoints
 from kite_rto.kite.plant import Measurement, PlantConfig
@@ -71,14 +74,14 @@ def test_normalization_reduces_lap_scatter_under_turbulence():
 @pytest.fixture(scope="module")
 def quick_settings():
     return KiteRTOSettings(experiment=ExperimentSpec(settle_time=10.0, settle_laps=1, n_laps=2),
-                           fd_step=(0.1, 0.1, 0.1), filter_gain=0.8, trust_radius=0.3)
+                           fd_step=(0.1, 0.1, 0.1)).with_gma(filter_gain=0.8, trust_radius=0.3)
 
 
 def test_deterministic_rto_improves_on_model_only_optimum(quick_settings):
-    c0 = model_only_optimum()[0]
+    c0 = model_only_optimum().c
     quiet = PlantConfig().without_disturbances()
-    res = run_kite_rto(quiet, seed=0, n_iter=3, settings=quick_settings)
-    assert not res.failed and res.crashes == 0 and len(res.records) == 3
+    res = run_rto(quiet, seed=0, n_iter=3, settings=quick_settings)
+    assert res.success and not res.message and res.crashes == 0 and len(res.records) == 3
     assert np.allclose(res.iterates[0], c0)
     t0, z0 = plant_performance(quiet, c0)
     t3, z3 = plant_performance(quiet, res.iterates[-1])
@@ -91,8 +94,8 @@ def test_deterministic_rto_improves_on_model_only_optimum(quick_settings):
 
 def test_same_seed_same_setpoint_sequence(quick_settings):
     settings = replace(quick_settings, experiment=replace(quick_settings.experiment, n_laps=1))
-    a = run_kite_rto(PlantConfig(), seed=5, n_iter=1, settings=settings)
-    b = run_kite_rto(PlantConfig(), seed=5, n_iter=1, settings=settings)
+    a = run_rto(PlantConfig(), seed=5, n_iter=1, settings=settings)
+    b = run_rto(PlantConfig(), seed=5, n_iter=1, settings=settings)
     ca = [e.c for e in a.experiments] + [a.iterates[-1]]
     cb = [e.c for e in b.experiments] + [b.iterates[-1]]
     assert np.array_equal(np.array(ca), np.array(cb))
@@ -100,7 +103,7 @@ def test_same_seed_same_setpoint_sequence(quick_settings):
 
 
 def test_session_repeats_a_crashed_experiment(quick_settings):
-    gma = make_kite_gma(quick_settings)
+    gma = make_gma(quick_settings)
     session = RTOSession(gma, ExperimentSpec(settle_time=0.0, settle_laps=0, n_laps=1), max_repeats=2)
     c = session.start(0.0)
     assert np.allclose(c, setpoints_from_shape(gma.c))          # GMA works in shape coordinates
@@ -112,8 +115,8 @@ def test_session_repeats_a_crashed_experiment(quick_settings):
 
 
 def test_kite_privileged_directions_hold_theta_0_and_span_the_other_two():
-    from kite_rto.rto.session import kite_directions
-    d = kite_directions(KiteRTOSettings())
+    from kite_rto.rto.builder import gma_directions
+    d = gma_directions(KiteRTOSettings())
     # the model optimum is the box's lower corner; its theta_0 bound stays active under every deviation
     assert d.fixed.tolist() == [True, False, False]
     width = KiteRTOSettings().box.upper() - KiteRTOSettings().box.lower()
@@ -125,9 +128,9 @@ def test_kite_privileged_directions_hold_theta_0_and_span_the_other_two():
 
 
 def test_a_directional_iteration_flies_the_nominal_and_one_experiment_per_direction(quick_settings):
-    from kite_rto.rto.session import kite_directions
+    from kite_rto.rto.builder import gma_directions
     quiet = PlantConfig().without_disturbances()
-    res = run_kite_rto(quiet, seed=0, n_iter=1, settings=quick_settings)
+    res = run_rto(quiet, seed=0, n_iter=1, settings=quick_settings)
     assert quick_settings.gradient == "directional" and quick_settings.experiments_per_iteration() == 3
     assert len(res.experiments) == 3 and res.records[0].gradient_method == "directional (2 of 3)"
     assert len({e.c[0] for e in res.experiments}) == 1     # theta_0 is never perturbed
@@ -135,7 +138,7 @@ def test_a_directional_iteration_flies_the_nominal_and_one_experiment_per_direct
     rec = res.records[0]
     assert rec.grad_cost[0] == pytest.approx(rec.grad_phi_hat[0], rel=1e-12)
     assert not np.isclose(rec.grad_cost[1], rec.grad_phi_hat[1])
-    assert kite_directions(quick_settings).fixed[0]
+    assert gma_directions(quick_settings).fixed[0]
 
 
 @pytest.mark.parametrize("bad, match", [

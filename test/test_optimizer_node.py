@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 from kite_rto.rto.experiment import ExperimentSpec
-from kite_rto.rto.session import KiteRTOSettings, run_kite_rto
+from kite_rto.rto.settings import KiteRTOSettings
+from kite_rto.rto.runner import run_rto
 from kite_rto.kite.plant import PlantConfig
-from kite_rto.flight.path import setpoints_from_shape
+from kite_rto.flight.shape import setpoints_from_shape
 from kite_rto.gma import HistoryStore
 
 from rosutil import Probe, start_node, stop
@@ -52,7 +53,7 @@ def stored(db):
 ], ids=["deterministic", "turbulent-seed-3"])
 def test_graph_flies_the_pure_runners_sequence(probe, ros_env, tmp_path, plant_params, config, n_iter):
     """With the controller synchronized to the optimizer (lockstep), the three processes fly exactly what
-    run_kite_rto flies: the same experiments, bit-identical measured costs and the same GMA iterates."""
+    run_rto flies: the same experiments, bit-identical measured costs and the same GMA iterates."""
     db = tmp_path / "rto.sqlite"
     opt, ctrl, plant = start_graph(probe, db, ros_env, sync=True, plant=plant_params, n_iter=n_iter)
     try:
@@ -65,7 +66,7 @@ def test_graph_flies_the_pure_runners_sequence(probe, ros_env, tmp_path, plant_p
     history, counts = stored(db)
     assert counts == {"experiments": PER * n_iter, "iterations": n_iter}, out
     settings = KiteRTOSettings(experiment=ExperimentSpec(n_laps=1, settle_laps=0))
-    pure = run_kite_rto(config, seed=plant_params.get("seed", 0), n_iter=n_iter, settings=settings)
+    pure = run_rto(config, seed=plant_params.get("seed", 0), n_iter=n_iter, settings=settings)
     ros_c = np.array([setpoints_from_shape(q.c) for q, _ in history.experiments])
     ros_cost = [r.cost for _, r in history.experiments]
     ros_next = np.array([setpoints_from_shape(rec.c_next) for rec in history.iterations])

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from kite_rto.kite.params import KiteParams
-from kite_rto.flight.path import (DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, SetpointError, Setpoints, ShapeBox,
-                                setpoints_from_shape, shape_from_setpoints,
+from kite_rto.flight.path import (DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, SetpointError, Setpoints,
                                 required_turn_radius, validate_setpoints)
+from kite_rto.flight.shape import ShapeBox, setpoints_from_shape, shape_from_setpoints
 from kite_rto.flight.projection import project_samples
 
 C = Setpoints.from_degrees(35.0, 45.0, 7.0)

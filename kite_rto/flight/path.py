@@ -19,13 +19,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
-import casadi as ca
 import numpy as np
 
 from ..kite.params import KiteParams
 
-__all__ = ["Setpoints", "SetpointBox", "SetpointError", "FigureEightPath", "ClosestPoint", "ShapeBox",
-           "shape_from_setpoints", "setpoints_from_shape", "validate_setpoints", "required_turn_radius",
+__all__ = ["Setpoints", "SetpointBox", "SetpointError", "FigureEightPath", "ClosestPoint", "validate_setpoints",
+           "required_turn_radius",
            "DEFAULT_SETPOINTS", "DEFAULT_TURN_MARGIN"]
 
 TWO_PI = 2.0 * math.pi
@@ -90,9 +89,9 @@ class SetpointBox:
     figures are therefore untrackable: the model optimum quoted in SPEC §2, (22, 15, 4) deg, needs a 4.6 m
     turn while the nominal kite's minimum radius is 1/g_s = 25 m. The trackable set is a band around
     ``A_theta ~ sqrt(sin theta_0 A_phi)``, not a box: the optimizer therefore works in the coordinates of
-    :class:`ShapeBox`, whose every point is trackable, and this box is the bounding box of the default
-    :class:`ShapeBox`: theta_0 in [30, 40] deg, A_phi in [42, 62] deg, A_theta in [5.5, 10.6] deg (positive:
-    up through the centre). Points of it outside the band (e.g. (30, 42, 10) deg) fail :func:`validate_setpoints`.
+    :class:`~kite_rto.flight.shape.ShapeBox`, whose every point is trackable, and this box is the bounding box of
+    the default one: theta_0 in [30, 40] deg, A_phi in [42, 62] deg, A_theta in [5.5, 10.6] deg (positive: up
+    through the centre). Points of it outside the band (e.g. (30, 42, 10) deg) fail :func:`validate_setpoints`.
     """
 
     theta_0: tuple = (math.radians(30.0), math.radians(40.0))
@@ -118,84 +117,6 @@ class SetpointBox:
     def corners(self) -> list[Setpoints]:
         """The 8 corners of the box."""
         return [Setpoints(a, b, c) for a in self.theta_0 for b in self.A_phi for c in self.A_theta]
-
-    def centre(self) -> Setpoints:
-        return Setpoints.from_array((self.lower() + self.upper()) / 2)
-
-
-def _sqrt_sin(theta_0, A_phi):
-    if isinstance(theta_0, (ca.SX, ca.MX)) or isinstance(A_phi, (ca.SX, ca.MX)):
-        return ca.sqrt(ca.sin(theta_0) * A_phi)
-    return np.sqrt(np.sin(theta_0) * A_phi)
-
-
-def shape_from_setpoints(c):
-    """Setpoints ``(theta_0, A_phi, A_theta)`` (rad) -> shape coordinates ``(theta_0, A_phi, aspect)``.
-
-    ``aspect = A_theta / sqrt(sin theta_0 A_phi)`` (dimensionless): the lobe-end turn radius is about
-    ``4 aspect^2 r``, whatever the size of the figure. NumPy arrays (shape (3,)) or CasADi 3-vectors.
-    """
-    if isinstance(c, (ca.SX, ca.MX)):
-        return ca.vertcat(c[0], c[1], c[2] / _sqrt_sin(c[0], c[1]))
-    c = np.asarray(c, dtype=float).ravel()
-    return np.array([c[0], c[1], c[2] / _sqrt_sin(c[0], c[1])])
-
-
-def setpoints_from_shape(x):
-    """Shape coordinates ``(theta_0, A_phi, aspect)`` -> setpoints ``(theta_0, A_phi, A_theta)`` (rad)."""
-    if isinstance(x, (ca.SX, ca.MX)):
-        return ca.vertcat(x[0], x[1], x[2] * _sqrt_sin(x[0], x[1]))
-    x = np.asarray(x, dtype=float).ravel()
-    return np.array([x[0], x[1], x[2] * _sqrt_sin(x[0], x[1])])
-
-
-@dataclass(frozen=True)
-class ShapeBox:
-    """The optimizer's box in shape coordinates ``x = (theta_0 rad, A_phi rad, aspect)`` (see
-    :func:`shape_from_setpoints`): a box whose every point is a trackable figure-eight.
-
-    In setpoints the trackable set is a curved band; in ``aspect`` it is nearly a slab: the lobe-end turn
-    depends on the aspect only, and the top/bottom turns loosen as the figure grows. The default
-    (theta_0 30-40 deg, A_phi 42-62 deg, aspect 0.16-0.22, i.e. A_theta 5.5-10.6 deg) passes
-    :func:`validate_setpoints` on a 7x7x7 grid with the default margin (``test/test_path.py``); its bounding
-    box in setpoints is the default :class:`SetpointBox`.
-    """
-
-    theta_0: tuple = (math.radians(30.0), math.radians(40.0))
-    A_phi: tuple = (math.radians(42.0), math.radians(62.0))
-    aspect: tuple = (0.16, 0.22)
-
-    def __post_init__(self):
-        for name in ("theta_0", "A_phi", "aspect"):
-            lo, hi = getattr(self, name)
-            if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 < lo < hi):
-                raise SetpointError(f"ShapeBox.{name} = {(lo, hi)!r}: expected finite bounds 0 < low < high")
-        if self.theta_0[1] >= math.pi / 2:
-            raise SetpointError(f"ShapeBox.theta_0 = {self.theta_0!r}: the upper bound must be < 90 deg")
-
-    def lower(self) -> np.ndarray:
-        return np.array([self.theta_0[0], self.A_phi[0], self.aspect[0]])
-
-    def upper(self) -> np.ndarray:
-        return np.array([self.theta_0[1], self.A_phi[1], self.aspect[1]])
-
-    def grid(self, n: int = 2) -> list[np.ndarray]:
-        """The n x n x n grid of shape points spanning the box (n = 2: the 8 corners)."""
-        axes = [np.linspace(lo, hi, n) for lo, hi in zip(self.lower(), self.upper())]
-        return [np.array([a, b, c]) for a in axes[0] for b in axes[1] for c in axes[2]]
-
-    def from_unit(self, z) -> np.ndarray:
-        """Setpoints (rad) of the point ``z`` in box-normalized shape coordinates ([0, 1]^3 spans the box)."""
-        return setpoints_from_shape(self.lower() + np.asarray(z, dtype=float) * (self.upper() - self.lower()))
-
-    def to_unit(self, c) -> np.ndarray:
-        """Box-normalized shape coordinates of setpoints ``c`` (rad); inverse of :meth:`from_unit`."""
-        return (shape_from_setpoints(c) - self.lower()) / (self.upper() - self.lower())
-
-    def setpoint_box(self) -> SetpointBox:
-        """The bounding :class:`SetpointBox` (A_theta grows with theta_0 < 90 deg and with A_phi)."""
-        lo, hi = setpoints_from_shape(self.lower()), setpoints_from_shape(self.upper())
-        return SetpointBox(theta_0=(lo[0], hi[0]), A_phi=(lo[1], hi[1]), A_theta=(lo[2], hi[2]))
 
 
 @dataclass(frozen=True)
@@ -230,10 +151,6 @@ class FigureEightPath:
         if isinstance(s, np.ndarray):
             return self._t0 + self._at * np.sin(2 * s), self._ap * np.sin(s)
         return self._t0 + self._at * math.sin(2 * s), self._ap * math.sin(s)
-
-    def derivative(self, s: float):
-        """``(d theta/ds, d phi/ds)``."""
-        return 2 * self._at * math.cos(2 * s), self._ap * math.cos(s)
 
     def _local(self, s: float):
         """north/east components of dP/ds and d2P/ds2 (second derivative of the components)."""
@@ -302,10 +219,6 @@ class FigureEightPath:
             lam = -k * math.cos(chi) + math.sqrt(max(1.0 - (k * math.sin(chi)) ** 2, 0.0))
             worst = max(worst, abs(self.curvature(si)) * lam)
         return r / worst
-
-    def length(self, n: int = 720) -> float:
-        """Arc length of one lap, rad (times r for metres)."""
-        return float(sum(self.speed(si) for si in np.arange(n) * (TWO_PI / n)) * TWO_PI / n)
 
     # --- closest point -------------------------------------------------------------------------
     def _residual(self, s: float, theta: float, phi: float):

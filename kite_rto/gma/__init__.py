@@ -5,16 +5,17 @@ predicts the controlled variables ``y(u)``. With ``y(u) = u`` this is standard M
 The core knows nothing about kites and never imports ``rclpy``. See ``docs/gma.md``.
 """
 from .directional import DirectionalGradient, PrivilegedDirections, lagrangian_gradient, privileged_directions
-from .gma import GMA, ModelRealization
+from .gma import GMA
 from .gradients import (FiniteDifferenceGradient, GradientEstimate, GradientEstimator, LeastSquaresGradient,
                         PlantPoint)
+from .modifiers import Decision, ModelRealization, Modifiers
 from .offline import run_offline
 from .problem import ModelProblem
 from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
 from .settings import GMASettings
 from .store import HistoryStore
 
-__all__ = ["HistoryStore", "ModelProblem", "GMASettings", "GMA", "ModelRealization", "GradientEstimator", "GradientEstimate",
-           "PlantPoint", "FiniteDifferenceGradient", "LeastSquaresGradient", "DirectionalGradient",
-           "PrivilegedDirections", "privileged_directions", "lagrangian_gradient", "ExperimentRequest",
-           "ExperimentResult", "IterationRecord", "History", "run_offline"]
+__all__ = ["HistoryStore", "ModelProblem", "GMASettings", "GMA", "ModelRealization", "Modifiers", "Decision",
+           "GradientEstimator", "GradientEstimate", "PlantPoint", "FiniteDifferenceGradient", "LeastSquaresGradient",
+           "DirectionalGradient", "PrivilegedDirections", "privileged_directions", "lagrangian_gradient",
+           "ExperimentRequest", "ExperimentResult", "IterationRecord", "History", "run_offline"]

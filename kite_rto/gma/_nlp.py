@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from .modifiers import Modifiers
 from .problem import ModelProblem
 from .settings import GMASettings
 
@@ -135,21 +136,27 @@ class ModifiedNLP:
         self._nlp = _TwoSolvers(f"{pr.name}_modified", {"x": ca.vertcat(pr.u, s), "p": p, "f": f, "g": g},
                                 settings, 1e-9)
 
-    def solve(self, c_k, eps, lam, mu, q, backoff, radius, rho: float | None, x0) -> NLPResult:
-        """Solve the modified problem; ``radius`` (n_c,) in setpoint units (``inf`` = no trust region),
-        ``mu`` shape (n_g, n_c), ``rho`` the L1 penalty or ``None`` for hard constraints.
-        ``x0`` (n_u,) is the cold-start guess (the model's realization of ``c_k``)."""
-        pr = self.problem
+    def solve(self, modifiers: Modifiers, *, radius, convexification, penalty: float | None, x0) -> NLPResult:
+        """Solve the modified problem around ``c_k = modifiers.c``.
+
+        Args:
+            modifiers: the :class:`Modifiers` (``eps``, ``lam``, ``mu`` (n_g, n_c), ``backoff``) at ``c_k``.
+            radius: trust-region half-widths (n_c,), setpoint units (``inf`` = none, 0 = ``y(u) = c_k``).
+            convexification: diagonal ``q`` (n_c,) of the added cost ``0.5 d^T diag(q) d``.
+            penalty: the L1 penalty ``rho`` of soft constraints, or ``None`` for hard constraints.
+            x0: cold-start guess (n_u,) (the model's realization of ``c_k``).
+        """
+        pr, m = self.problem, modifiers
         n_g = pr.n_g
-        c_k = np.asarray(c_k, float)
-        p = np.r_[c_k, eps, lam, np.asarray(mu, float).reshape(n_g, pr.n_c).ravel(order="F"), q, backoff,
-                  0.0 if rho is None else rho]
+        c_k = np.asarray(m.c, float)
+        p = np.r_[c_k, m.eps, m.lam, np.asarray(m.mu, float).reshape(n_g, pr.n_c).ravel(order="F"),
+                  convexification, m.backoff, 0.0 if penalty is None else penalty]
         lby = np.maximum(pr.c_lb, c_k - radius)
         uby = np.minimum(pr.c_ub, c_k + radius)
         lbg = np.r_[-np.inf * np.ones(n_g), lby, self._lbg_tail]
         ubg = np.r_[np.zeros(n_g), uby, self._ubg_tail]
         lbx = np.r_[pr.lbu, np.zeros(n_g)]
-        ubx = np.r_[pr.ubu, (np.inf if rho is not None else 0.0) * np.ones(n_g)]
+        ubx = np.r_[pr.ubu, (np.inf if penalty is not None else 0.0) * np.ones(n_g)]
         x0 = np.r_[np.asarray(x0, float), np.zeros(n_g)]
         return self._nlp.solve(x0, p, lbx, ubx, lbg, ubg)
 

@@ -9,29 +9,34 @@ from __future__ import annotations
 
 import time
 from copy import deepcopy
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ._nlp import ModifiedNLP, RealizationNLP
-from .gradients import FiniteDifferenceGradient, GradientEstimator, PlantPoint
+from .gradients import FiniteDifferenceGradient, GradientEstimate, GradientEstimator, PlantPoint
+from .modifiers import Decision, ModelRealization, Modifiers
 from .problem import ModelProblem
 from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
 from .settings import GMASettings, per_setpoint
 
-__all__ = ["GMA", "ModelRealization"]
+__all__ = ["GMA"]
 
 
-class ModelRealization:
-    """The model's best realization of setpoints ``c`` and its gradients with respect to ``c``.
+@dataclass
+class _Proposal:
+    """The outcome of the modified problem in one iteration: where it points and what GMA decided."""
 
-    Attributes: ``u`` (n_u,), ``phi`` (scalar), ``g`` (n_g,), ``grad_phi`` (n_c,) from the multipliers of
-    ``y(u) = c``, ``jac_g`` (n_g, n_c) from central differences of warm-started re-solves, ``success``,
-    ``status``.
-    """
+    decision: Decision
+    detail: str
+    modifiers: Modifiers
+    u_star: np.ndarray
+    cost: float
+    status: str
+    c_star: np.ndarray
 
-    def __init__(self, u, phi, g, grad_phi, jac_g, success, status):
-        self.u, self.phi, self.g, self.grad_phi, self.jac_g = u, phi, g, grad_phi, jac_g
-        self.success, self.status = success, status
+
+_NOT_SOLVED = "not solved"
 
 
 class GMA:
@@ -72,7 +77,7 @@ class GMA:
                                                         "n_c": n_c, "n_g": n_g, "settings": s.to_dict()})
             self._k, self._c = 0, c0.copy()
             self._radius, self._prev_step = self._radius0.copy(), np.zeros(n_c)
-            self._prev_mod = (c0.copy(), np.zeros(n_g), np.zeros((n_g, n_c)), self._backoff.copy())
+            self._prev_mod = Modifiers.zero(c0, n_g, self._backoff)
             self._plan()
 
     # ------------------------------------------------------------------ public interface
@@ -132,10 +137,9 @@ class GMA:
     def model_optimum(self) -> np.ndarray:
         """``y(u)`` at the model optimum inside the setpoint box (no modifiers, no trust region)."""
         pr = self.problem
-        n_c, n_g = pr.n_c, pr.n_g
-        res = self.modified_nlp.solve(0.5 * (pr.c_lb + pr.c_ub), np.zeros(n_g), np.zeros(n_c),
-                                      np.zeros((n_g, n_c)), np.zeros(n_c), np.zeros(n_g),
-                                      np.full(n_c, np.inf), None, pr.u0)
+        res = self.modified_nlp.solve(Modifiers.zero(0.5 * (pr.c_lb + pr.c_ub), pr.n_g),
+                                      radius=np.full(pr.n_c, np.inf), convexification=np.zeros(pr.n_c),
+                                      penalty=None, x0=pr.u0)
         if not res.success:
             raise RuntimeError(f"GMA: the model optimization failed ({res.status}); pass c0 explicitly")
         return np.clip(pr.evaluate(res.x[: pr.n_u])[2], pr.c_lb, pr.c_ub)
@@ -166,11 +170,10 @@ class GMA:
         c = np.asarray(c, float)
         if self.settings.model_point == "realization" or pr.n_g == 0:
             return self.realize(c)
-        c_prev, eps_prev, mu_prev, b_prev = self._prev_mod
         x0 = self.realization_nlp.last.x if self.realization_nlp.last is not None else pr.u0
-        res = self.modified_nlp.solve(c, eps_prev + mu_prev @ (c - c_prev), np.zeros(pr.n_c), mu_prev,
-                                      np.zeros(pr.n_c), b_prev, np.zeros(pr.n_c), self.settings.constraint_penalty,
-                                      x0)
+        res = self.modified_nlp.solve(self._prev_mod.shifted(c), radius=np.zeros(pr.n_c),
+                                      convexification=np.zeros(pr.n_c),
+                                      penalty=self.settings.constraint_penalty, x0=x0)
         if not res.success:
             out = self.realize(c)
             out.status = f"{out.status} (consistent point failed: {res.status})"
@@ -205,8 +208,7 @@ class GMA:
         return jac
 
     def _points(self, exclude_iteration: int | None = None) -> list[PlantPoint]:
-        return [PlantPoint(q.c, r.cost, r.constraints, r.cost_std, r.constraints_std)
-                for q, r in self.history.experiments if q.iteration != exclude_iteration]
+        return [_plant_point(q, r) for q, r in self.history.experiments if q.iteration != exclude_iteration]
 
     def _plan(self) -> None:
         """Plan the experiments of iteration ``k``: the nominal point, then the strategy's perturbations."""
@@ -224,16 +226,16 @@ class GMA:
             last = h.iterations[-1]
             self._k, self._c = last.k + 1, last.c_next.copy()
             self._radius, self._prev_step = last.trust_radius_next.copy(), last.step.copy()
-            if last.modified_status == "not solved" or not np.all(np.isfinite(last.u_star)):
+            if last.modified_status == _NOT_SOLVED or not np.all(np.isfinite(last.u_star)):
                 prev = [r for r in h.iterations if np.all(np.isfinite(r.u_star))]
                 last = prev[-1] if prev else None
-            self._prev_mod = ((last.c_k.copy(), last.eps.copy(), last.mu.copy(), last.backoff.copy())
-                              if last is not None else (np.asarray(h.c0, float).copy(), np.zeros(n_g),
-                                                        np.zeros((n_g, n_c)), self._backoff.copy()))
+            self._prev_mod = (Modifiers(last.c_k.copy(), last.eps.copy(), last.lam.copy(), last.mu.copy(),
+                                        last.backoff.copy())
+                              if last is not None else Modifiers.zero(h.c0, n_g, self._backoff))
         else:
             self._k, self._c = 0, np.asarray(h.c0, float).copy()
             self._radius, self._prev_step = self._radius0.copy(), np.zeros(n_c)
-            self._prev_mod = (self._c.copy(), np.zeros(n_g), np.zeros((n_g, n_c)), self._backoff.copy())
+            self._prev_mod = Modifiers.zero(self._c, n_g, self._backoff)
         if self._c.size != n_c:
             raise ValueError(f"GMA: history has {self._c.size} setpoints, the problem has n_c={n_c}")
         if not h.pending or h.pending[0].iteration != self._k:
@@ -242,78 +244,99 @@ class GMA:
             self._complete()
 
     def _complete(self) -> IterationRecord:
+        """Close iteration ``k``: gradients, modifiers, the modified problem, the filtered step, the record."""
         t0 = time.perf_counter()
         pr, s, k, c_k = self.problem, self.settings, self._k, self._c.copy()
-        n_c, n_g = pr.n_c, pr.n_g
-        results = {q.request_id: (q, r) for q, r in self.history.experiments if q.iteration == k}
-        ordered = [results[q.request_id] for q in self.history.pending]
-        pts = [PlantPoint(q.c, r.cost, r.constraints, r.cost_std, r.constraints_std) for q, r in ordered]
-        nominal = pts[0]
+        ordered = self._experiments_of(k)
+        nominal, *new = [_plant_point(q, r) for q, r in ordered]
         model = self.linearize(c_k)
-        past = self._points(exclude_iteration=k)
-        est = (self.gradient.estimate(c_k, nominal, pts[1:], past, model=model) if self.gradient.uses_model
-               else self.gradient.estimate(c_k, nominal, pts[1:], past))
+        est = self._estimate(c_k, nominal, new, model)
         notes = [est.notes] if est.notes else []
+        mods = self._modifiers(c_k, nominal, model, est, notes)
+        radius_abs = self._radius * self._width
+        prop = self._propose(mods, nominal, model, est, radius_abs, notes)
+        step = np.clip(self._K * (prop.c_star - c_k), -self._max_step, self._max_step)
+        c_next = np.clip(c_k + step, pr.c_lb, pr.c_ub)
+        step = c_next - c_k
+        radius_used = self._radius.copy()
+        self._adapt_trust_region(step, prop.c_star - c_k, radius_abs)
+        decision, detail = prop.decision, prop.detail
+        if decision is Decision.STEP and bool(np.all(np.abs(step) <= s.tol_c * self._width)):
+            decision, detail = Decision.CONVERGED, ""
+        rec = IterationRecord(
+            k=k, c_k=c_k, cost=nominal.cost, constraints=nominal.constraints, grad_cost=est.cost,
+            jac_constraints=est.constraints.reshape(pr.n_g, pr.n_c), gradient_quality=est.quality,
+            gradient_method=est.method, phi_hat=model.phi, g_hat=model.g, grad_phi_hat=model.grad_phi,
+            jac_g_hat=model.jac_g, u_hat=model.u, model_status=model.status, eps=mods.eps, lam=mods.lam,
+            mu=mods.mu, backoff=prop.modifiers.backoff, u_star=prop.u_star, modified_cost=prop.cost,
+            modified_status=prop.status, c_star=prop.c_star, step=step, c_next=c_next, trust_radius=radius_used,
+            trust_radius_next=self._radius.copy(), converged=decision is Decision.CONVERGED,
+            decision=decision.describe(detail), notes=notes, solve_time=time.perf_counter() - t0,
+            experiment_ids=[q.request_id for q, _ in ordered])
+        self.history.iterations.append(rec)
+        self._k, self._c = k + 1, c_next
+        if decision.moved:
+            self._prev_step = step
+        self._plan()
+        return rec
+
+    def _experiments_of(self, k: int) -> list:
+        """The finished ``(request, result)`` pairs of iteration ``k``, in planned order (nominal first)."""
+        results = {q.request_id: (q, r) for q, r in self.history.experiments if q.iteration == k}
+        return [results[q.request_id] for q in self.history.pending]
+
+    def _estimate(self, c_k, nominal: PlantPoint, new: list[PlantPoint], model: ModelRealization
+                  ) -> GradientEstimate:
+        """The plant gradients at ``c_k`` from this iteration's experiments and the earlier ones."""
+        past = self._points(exclude_iteration=self._k)
+        if self.gradient.uses_model:
+            return self.gradient.estimate(c_k, nominal, new, past, model=model)
+        return self.gradient.estimate(c_k, nominal, new, past)
+
+    def _modifiers(self, c_k, nominal: PlantPoint, model: ModelRealization, est: GradientEstimate,
+                   notes: list[str]) -> Modifiers:
+        """Plant minus model at ``c_k``; gradient modifiers filtered with ``modifier_filter`` (noted)."""
         eps = nominal.constraints - model.g
         lam = est.cost - model.grad_phi
         mu = est.constraints - model.jac_g
-        b = s.modifier_filter
+        b = self.settings.modifier_filter
         prev = None if b == 1.0 else next((r for r in reversed(self.history.iterations)
                                            if np.all(np.isfinite(r.lam)) and np.all(np.isfinite(r.mu))), None)
         if prev is not None and np.all(np.isfinite(lam)) and np.all(np.isfinite(mu)):
             lam = (1.0 - b) * prev.lam + b * lam
             mu = (1.0 - b) * prev.mu.reshape(mu.shape) + b * mu
             notes.append(f"modifiers filtered (b = {b:g})")
-        radius_abs = self._radius * self._width
-        u_star, mod_cost, mod_status = np.full(pr.n_u, np.nan), np.nan, "not solved"
-        backoff = self._backoff.copy()
-        c_star = c_k.copy()
+        return Modifiers(c_k, eps, lam, mu, self._backoff.copy())
+
+    def _propose(self, mods: Modifiers, nominal: PlantPoint, model: ModelRealization, est: GradientEstimate,
+                 radius_abs: np.ndarray, notes: list[str]) -> _Proposal:
+        """Solve the modified problem at ``mods.c`` inside the trust region, or say why GMA holds.
+
+        A failed solve shrinks the trust radius; a solved one becomes the next consistent model point."""
+        pr, s, c_k = self.problem, self.settings, mods.c
+        hold = _Proposal(Decision.HOLD_NO_REALIZATION, "", mods, np.full(pr.n_u, np.nan), np.nan, _NOT_SOLVED,
+                         c_k.copy())
         if not model.success:
-            decision = "hold: the model cannot realize c_k"
             notes.append(f"realization status {model.status}")
-        elif not (np.all(np.isfinite(lam)) and np.all(np.isfinite(mu)) and est.quality > 0):
-            decision = "hold: unusable gradient estimate"
-        else:
-            if n_g and s.backoff_std_factor > 0 and nominal.constraints_std is not None:
-                backoff += s.backoff_std_factor * nominal.constraints_std
-            res = self.modified_nlp.solve(c_k, eps, lam, mu, self._q, backoff, radius_abs,
-                                          s.constraint_penalty, model.u)
-            mod_status, mod_cost = res.status, res.f
-            if res.success:
-                self._prev_mod = (c_k.copy(), eps.copy(), mu.copy(), backoff.copy())
-                u_star = res.x[: pr.n_u]
-                c_star = np.clip(pr.evaluate(u_star)[2], pr.c_lb, pr.c_ub)
-                at_bound = np.abs(c_star - c_k) >= 0.999 * radius_abs
-                decision = "step" + (f" (trust region active on c{np.flatnonzero(at_bound).tolist()})"
-                                     if at_bound.any() else "")
-                if n_g and res.x.size > pr.n_u and np.any(res.x[pr.n_u:] > 1e-8):
-                    notes.append("soft constraints violated in the modified problem")
-            else:
-                decision = "hold: the modified problem failed"
-                self._radius = np.maximum(self._radius * s.trust_shrink, s.trust_radius_min)
-        step = np.clip(self._K * (c_star - c_k), -self._max_step, self._max_step)
-        c_next = np.clip(c_k + step, pr.c_lb, pr.c_ub)
-        step = c_next - c_k
-        radius_used = self._radius.copy()
-        self._adapt_trust_region(step, c_star - c_k, radius_abs)
-        converged = decision.startswith("step") and bool(np.all(np.abs(step) <= s.tol_c * self._width))
-        if converged:
-            decision = "converged"
-        rec = IterationRecord(
-            k=k, c_k=c_k, cost=nominal.cost, constraints=nominal.constraints, grad_cost=est.cost,
-            jac_constraints=est.constraints.reshape(n_g, n_c), gradient_quality=est.quality,
-            gradient_method=est.method, phi_hat=model.phi, g_hat=model.g, grad_phi_hat=model.grad_phi,
-            jac_g_hat=model.jac_g, u_hat=model.u, model_status=model.status, eps=eps, lam=lam, mu=mu,
-            backoff=backoff, u_star=u_star, modified_cost=mod_cost, modified_status=mod_status, c_star=c_star, step=step,
-            c_next=c_next, trust_radius=radius_used, trust_radius_next=self._radius.copy(),
-            converged=converged, decision=decision, notes=notes, solve_time=time.perf_counter() - t0,
-            experiment_ids=[q.request_id for q, _ in ordered])
-        self.history.iterations.append(rec)
-        self._k, self._c = k + 1, c_next
-        if decision.startswith("step") or decision == "converged":
-            self._prev_step = step
-        self._plan()
-        return rec
+            return hold
+        if not (np.all(np.isfinite(mods.lam)) and np.all(np.isfinite(mods.mu)) and est.quality > 0):
+            return replace(hold, decision=Decision.HOLD_BAD_GRADIENT)
+        if pr.n_g and s.backoff_std_factor > 0 and nominal.constraints_std is not None:
+            mods = replace(mods, backoff=mods.backoff + s.backoff_std_factor * nominal.constraints_std)
+        res = self.modified_nlp.solve(mods, radius=radius_abs, convexification=self._q,
+                                      penalty=s.constraint_penalty, x0=model.u)
+        if not res.success:
+            self._radius = np.maximum(self._radius * s.trust_shrink, s.trust_radius_min)
+            return replace(hold, decision=Decision.HOLD_SOLVE_FAILED, modifiers=mods, cost=res.f, status=res.status)
+        self._prev_mod = replace(mods, c=c_k.copy(), eps=mods.eps.copy(), mu=mods.mu.copy(),
+                                 backoff=mods.backoff.copy())
+        u_star = res.x[: pr.n_u]
+        c_star = np.clip(pr.evaluate(u_star)[2], pr.c_lb, pr.c_ub)
+        at_bound = np.abs(c_star - c_k) >= 0.999 * radius_abs
+        if pr.n_g and res.x.size > pr.n_u and np.any(res.x[pr.n_u:] > 1e-8):
+            notes.append("soft constraints violated in the modified problem")
+        detail = f"trust region active on c{np.flatnonzero(at_bound).tolist()}" if at_bound.any() else ""
+        return _Proposal(Decision.STEP, detail, mods, u_star, res.f, res.status, c_star)
 
     def _adapt_trust_region(self, step, proposed, radius_abs) -> None:
         """Per setpoint: shrink on a sign change of the step, grow when the bound was hit without one."""
@@ -324,3 +347,8 @@ class GMA:
         hit = (np.abs(proposed) >= 0.999 * radius_abs) & ~flip
         self._radius = np.where(flip, np.maximum(self._radius * s.trust_shrink, s.trust_radius_min), self._radius)
         self._radius = np.where(hit, np.minimum(self._radius * s.trust_grow, self._radius0), self._radius)
+
+
+def _plant_point(request: ExperimentRequest, result: ExperimentResult) -> PlantPoint:
+    """A finished experiment as the gradient estimators see it."""
+    return PlantPoint(request.c, result.cost, result.constraints, result.cost_std, result.constraints_std)

@@ -146,15 +146,40 @@ class ModelProblem:
         """A right inverse ``R`` (n_u, n_c) of ``dy/du`` inside the tangent space of the model-internal
         constraints active at ``u`` (equalities, active inner constraints, active bounds):
         ``dy R = I``, ``dh R = 0``, ``dgin_active R = 0``, ``R[i] = 0`` for bounded ``u_i``. Minimum norm.
-        ``grad_u f(u) R`` is then the gradient of ``f`` with respect to the setpoints along the model."""
+        ``grad_u f(u) R`` is then the gradient of ``f`` with respect to the setpoints along the model.
+
+        An active inner constraint or bound whose row is a combination of the rows before it (``dy``, ``dh``,
+        the active constraints kept so far) is left out: it holds because ``y(u) = c`` holds (e.g. an input
+        passed straight into ``y`` whose bounds are the setpoint box, at one of them), so the setpoints move
+        it, and keeping it would contradict ``dy R = I`` and bias the least-squares solution.
+        """
         u = np.asarray(u, dtype=float)
         J = self.jacobians(u)
-        rows = [J["dy"], J["dh"], J["dgin"][J["gin"] >= -tol * (1 + np.abs(J["gin"]))]]
         at_bound = (np.abs(u - self.lbu) <= tol * (1 + np.abs(self.lbu))) | \
                    (np.abs(u - self.ubu) <= tol * (1 + np.abs(self.ubu)))
-        rows.append(np.eye(self.n_u)[at_bound])
-        M = np.vstack(rows)
+        active = np.vstack([J["dgin"][J["gin"] >= -tol * (1 + np.abs(J["gin"]))], np.eye(self.n_u)[at_bound]])
+        base = np.vstack([J["dy"], J["dh"]])
+        M = np.vstack([base, active[_independent_rows(base, active)]])
         E = np.zeros((M.shape[0], self.n_c))
         E[: self.n_c] = np.eye(self.n_c)
         R, *_ = np.linalg.lstsq(M, E, rcond=None)
         return R
+
+
+def _independent_rows(base: np.ndarray, rows: np.ndarray, rtol: float = 1e-9) -> list[int]:
+    """Indices of ``rows`` that are not linear combinations of the rows of ``base`` and of the rows kept
+    before them (relative residual of the projection onto their span > ``rtol``), in order."""
+    if base.shape[0]:
+        _, sv, vt = np.linalg.svd(base, full_matrices=False)
+        basis = vt[sv > rtol * sv[0]] if sv.size and sv[0] > 0 else vt[:0]
+    else:
+        basis = np.zeros((0, rows.shape[1]))
+    keep = []
+    for i, row in enumerate(rows):
+        r = row - basis.T @ (basis @ row)
+        r = r - basis.T @ (basis @ r)          # second Gram-Schmidt pass: keeps the basis orthonormal
+        n = np.linalg.norm(r)
+        if n > rtol * max(np.linalg.norm(row), 1e-300):
+            basis = np.vstack([basis, r / n])
+            keep.append(i)
+    return keep

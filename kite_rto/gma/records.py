@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from .modifiers import Decision
+
 __all__ = ["ExperimentRequest", "ExperimentResult", "IterationRecord", "History"]
 
 
@@ -128,7 +130,8 @@ class IterationRecord(_Serializable):
     (n_g,). Modified problem:
     ``u_star``, ``modified_cost``, ``modified_status``, ``c_star = y(u_star)``. Update: ``step`` (filtered,
     bounded), ``c_next``, relative trust radii ``trust_radius`` (used) and ``trust_radius_next``, ``converged``,
-    ``decision``, ``notes``, wall-clock ``solve_time`` (s) and the ids of the experiments used.
+    ``decision`` (the text of a :class:`~kite_rto.gma.Decision`, read back with :attr:`outcome`), ``notes``,
+    wall-clock ``solve_time`` (s) and the ids of the experiments used.
     """
 
     k: int
@@ -165,6 +168,11 @@ class IterationRecord(_Serializable):
     _arrays = ("c_k", "constraints", "grad_cost", "jac_constraints", "g_hat", "grad_phi_hat", "jac_g_hat",
                "u_hat", "eps", "lam", "mu", "backoff", "u_star", "c_star", "step", "c_next", "trust_radius",
                "trust_radius_next")
+
+    @property
+    def outcome(self) -> Decision:
+        """What GMA did in this iteration, as a :class:`~kite_rto.gma.Decision`."""
+        return Decision.of(self.decision)
 
     @classmethod
     def from_dict(cls, data: dict):

@@ -13,7 +13,7 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["GMASettings"]
+__all__ = ["GMASettings", "per_setpoint"]
 
 Scalar = float | Sequence[float]
 

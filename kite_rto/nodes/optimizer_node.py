@@ -24,9 +24,12 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
-from ..rto.session import KiteRTOSettings, RTOSession, make_kite_gma
+from ..rto.builder import make_gma
+from ..rto.session import RTOSession
+from ..rto.settings import KiteRTOSettings
 from ..kite.params import KiteParams, ParameterError
-from ..flight.path import Setpoints, SetpointError, ShapeBox, setpoints_from_shape, validate_setpoints
+from ..flight.path import Setpoints, SetpointError, validate_setpoints
+from ..flight.shape import ShapeBox, setpoints_from_shape
 from ..gma import HistoryStore
 from .common import (LATCHED, MEASUREMENTS, RELIABLE_10, ParamSpec, declare_params, ns_to_stamp, request_exit,
                      run_node, stamp_to_ns)
@@ -61,11 +64,11 @@ PARAMS = (
               "where theta_0 is held)", 1, 3, unit="directions"),
     ParamSpec("fd_step", float(_S.fd_step[0]), "finite-difference step (directional: along each direction)",
               0.01, 1.0, unit="fraction of the shape box width"),
-    ParamSpec("filter_gain", _S.filter_gain, "GMA input filter K", 0.01, 1.0, unit="dimensionless"),
-    ParamSpec("modifier_filter", _S.modifier_filter, "GMA filter on the gradient modifiers (1 = none)", 0.01, 1.0,
+    ParamSpec("filter_gain", _S.gma.filter_gain, "GMA input filter K", 0.01, 1.0, unit="dimensionless"),
+    ParamSpec("modifier_filter", _S.gma.modifier_filter, "GMA filter on the gradient modifiers (1 = none)", 0.01, 1.0,
               unit="dimensionless"),
-    ParamSpec("trust_radius", _S.trust_radius, "initial trust radius (not below GMA's minimum trust radius)",
-              _S.trust_radius_min, 10.0, unit="fraction of the box width"),
+    ParamSpec("trust_radius", _S.gma.trust_radius, "initial trust radius (not below GMA's minimum trust radius)",
+              _S.gma.trust_radius_min, 10.0, unit="fraction of the box width"),
     ParamSpec("box_theta_0_deg", [round(math.degrees(v), 9) for v in _S.box.theta_0], "optimizer's theta_0 range [low, high]",
               1.0, 89.0, unit="deg"),
     ParamSpec("box_A_phi_deg", [round(math.degrees(v), 9) for v in _S.box.A_phi], "optimizer's A_phi range [low, high]",
@@ -119,15 +122,15 @@ class OptimizerNode(Node):
             spec = replace(_E, n_laps=v["n_laps"], settle_laps=v["settle_laps"], settle_time=v["settle_time"],
                            max_duration=v["max_duration"], normalize=v["normalize"], h_min=v["h_min"])
             self.settings = replace(_S, experiment=spec, box=_shape_box(v), gradient=v["gradient"],
-                                    n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3,
-                                    filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
-                                    trust_radius=v["trust_radius"])
+                                    n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3
+                                    ).with_gma(filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
+                                               trust_radius=v["trust_radius"])
         except ValueError as err:
             raise ParameterError(str(err)) from None
         self.store = HistoryStore(v["db"])
         history = self.store.load() if v["resume"] else None
         try:   # e.g. more privileged directions than setpoints free to move on this box
-            self.gma = make_kite_gma(self.settings, history=history)
+            self.gma = make_gma(self.settings, history=history)
         except ValueError as err:
             raise ParameterError(f"parameters gradient = {v['gradient']!r}, n_directions = {v['n_directions']}: "
                                  f"{err}") from None
@@ -246,8 +249,8 @@ class OptimizerNode(Node):
                                       f"t = {m.t:.2f} s: its data is discarded, repeating it "
                                       f"({self.session.repeats}/{self.session.max_repeats})")
         self._persist()
-        if self.session.failed:
-            self.phase = f"failed: {self.session.failed}"
+        if self.session.stopped:
+            self.phase = f"failed: {self.session.message}"
             self.get_logger().error(self.phase)
             self.done = True
         elif self.p["n_iter"] and len(self.gma.records) >= self.p["n_iter"]:
@@ -287,7 +290,7 @@ class OptimizerNode(Node):
             validate_setpoints(np.asarray(c, dtype=float), box, KiteParams())
         except SetpointError as err:
             self.get_logger().error(f"refusing to publish unsafe setpoints: {err}")
-            self.session.failed = f"unsafe setpoints requested: {err}"
+            self.session.stop(f"unsafe setpoints requested: {err}")
             self.done = True
             return
         msg = JointState()
@@ -310,7 +313,7 @@ class OptimizerNode(Node):
 
     def publish_status(self) -> None:
         st = DiagnosticStatus(name="kite_rto/optimizer", hardware_id="kite_rto")
-        st.level = DiagnosticStatus.ERROR if self.session.failed else DiagnosticStatus.OK
+        st.level = DiagnosticStatus.ERROR if self.session.stopped else DiagnosticStatus.OK
         st.message = self.phase
         req = self.session.request
         kv = {"iteration": len(self.gma.records), "phase": self.phase,

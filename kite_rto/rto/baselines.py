@@ -17,7 +17,7 @@ import numpy as np
 
 from .experiment import ExperimentSpec, PlantFlight
 from .oracle import plant_performance
-from ..flight.path import ShapeBox
+from ..flight.shape import ShapeBox
 from ..kite.plant import PlantConfig
 
 __all__ = ["BaselineRun", "model_only", "finite_difference_ascent", "nelder_mead_plant", "time_to_target"]

@@ -1,7 +1,7 @@
 """Privileged directions of the kite for directional modifier adaptation (DMA, ``kite_rto.gma.directional``).
 
 The model's optimality conditions at its own optimum ``x_0`` (shape coordinates ``(theta_0, A_phi, aspect)``)
-move with the uncertain model parameters. :func:`kite_privileged_directions` re-solves the model's best
+move with the uncertain model parameters. :func:`privileged_directions_for` re-solves the model's best
 realization of ``x_0`` once per parameter of :class:`ModelUncertainty`, each deviated by its plausible amount,
 and hands the change of the Lagrangian gradient to :func:`~kite_rto.gma.privileged_directions`.
 
@@ -20,11 +20,11 @@ from functools import lru_cache
 import numpy as np
 
 from ..gma import GMASettings, PrivilegedDirections, lagrangian_gradient, privileged_directions
-from .ocp import KiteOCPSettings, kite_model_problem
+from .ocp import KiteOCPSettings, model_problem
 from ..kite.params import KiteParams, ParameterError
-from ..flight.path import ShapeBox
+from ..flight.shape import ShapeBox
 
-__all__ = ["ModelUncertainty", "kite_privileged_directions"]
+__all__ = ["ModelUncertainty", "privileged_directions_for"]
 
 
 @dataclass(frozen=True)
@@ -62,7 +62,7 @@ def _at_bound(x, lb, ub, tol: float = 1e-6) -> np.ndarray:
 
 
 @lru_cache(maxsize=8)
-def kite_privileged_directions(box: ShapeBox, x0: tuple, nu: tuple, model_params: KiteParams = KiteParams(),
+def privileged_directions_for(box: ShapeBox, x0: tuple, nu: tuple, model_params: KiteParams = KiteParams(),
                                ocp: KiteOCPSettings = KiteOCPSettings(),
                                uncertainty: ModelUncertainty = ModelUncertainty(),
                                n_directions: int = 2) -> PrivilegedDirections:
@@ -74,7 +74,7 @@ def kite_privileged_directions(box: ShapeBox, x0: tuple, nu: tuple, model_params
 
     def gradient(theta):
         params = replace(model_params, **dict(zip(names, (float(t) for t in theta))))
-        problem = kite_model_problem(params, ocp, c_lb=box.lower(), c_ub=box.upper(), c_guess=x0,
+        problem = model_problem(params, ocp, c_lb=box.lower(), c_ub=box.upper(), c_guess=x0,
                                      name="kite_dma", shape=True)
         return lagrangian_gradient(problem, x0, nu, settings)
 

@@ -38,15 +38,12 @@ import numpy as np
 
 from ..kite.model import KiteModel
 from ..kite.params import KiteParams, check_range
-from ..flight.path import setpoints_from_shape, shape_from_setpoints
+from ..flight.shape import setpoints_from_shape, shape_from_setpoints
 from ..flight.projection import project_samples
 
-try:
-    from ..gma import ModelProblem
-except ImportError:  # kite_rto.gma without its __init__ re-export yet
-    from ..gma.problem import ModelProblem
+from ..gma import ModelProblem
 
-__all__ = ["KiteOCPSettings", "KiteModelProblem", "kite_model_problem", "path_guess", "unpack",
+__all__ = ["KiteOCPSettings", "KiteModelProblem", "model_problem", "path_guess", "unpack",
            "DEFAULT_C_LB", "DEFAULT_C_UB", "DEFAULT_C_GUESS"]
 
 _DEG = math.pi / 180.0
@@ -159,7 +156,7 @@ def _softmin(z, h_ref: float, s: float):
     return h_ref - s * ca.log(ca.sum1(ca.exp(-(z - h_ref) / s)))
 
 
-def kite_model_problem(params: KiteParams | None = None, settings: KiteOCPSettings | None = None,
+def model_problem(params: KiteParams | None = None, settings: KiteOCPSettings | None = None,
                        c_lb=None, c_ub=None, c_guess=None, name: str = "kite_lap",
                        shape: bool = False) -> KiteModelProblem:
     """Build the periodic-lap OCP of the open-loop kite as a :class:`ModelProblem` (all fields symbolic SX).
@@ -174,7 +171,7 @@ def kite_model_problem(params: KiteParams | None = None, settings: KiteOCPSettin
             instead of setpoints; ``c_lb``, ``c_ub`` and ``c_guess`` are then shape coordinates too (and required).
     """
     if shape and (c_lb is None or c_ub is None or c_guess is None):
-        raise ValueError("kite_model_problem(shape=True): give c_lb, c_ub and c_guess in shape coordinates")
+        raise ValueError("model_problem(shape=True): give c_lb, c_ub and c_guess in shape coordinates")
     params = params or KiteParams()
     settings = settings or KiteOCPSettings()
     c_lb = DEFAULT_C_LB if c_lb is None else np.asarray(c_lb, dtype=float)

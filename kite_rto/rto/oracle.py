@@ -2,10 +2,13 @@
 
 :func:`plant_performance` flies setpoints ``c`` on the plant with turbulence and noise off, from launch, and
 averages whole laps after the transient. :func:`find_oracle` maximizes the mean tension over the optimizer's
-:class:`~kite_rto.flight.path.ShapeBox` subject to ``min altitude >= h_min``: a coarse grid, then Nelder–Mead
+:class:`~kite_rto.flight.shape.ShapeBox` subject to ``min altitude >= h_min``: a coarse grid, then Nelder–Mead
 (box-normalized shape coordinates, clipped,
-with a penalty on altitude violation) from the best grid points. Results are cached in
-``runs/oracle_<hash>.json`` keyed by the plant configuration, the box and the evaluation settings.
+with a penalty on altitude violation) from the best grid points. Results are cached as ``oracle_<hash>.json``
+keyed by the plant configuration, the box and the evaluation settings, in the directory of
+:func:`oracle_cache_dir`: an explicit ``cache_dir``, else the environment variable ``KITE_RTO_CACHE``, else the
+platform's user cache directory (``platformdirs.user_cache_dir("kite_rto")``, e.g. ``~/.cache/kite_rto`` on
+Linux), never inside the installed package.
 """
 from __future__ import annotations
 
@@ -17,15 +20,16 @@ import os
 from dataclasses import dataclass, asdict
 
 import numpy as np
+from platformdirs import user_cache_dir
 
 from .experiment import ExperimentSpec, PlantFlight
-from ..flight.path import ShapeBox
+from ..flight.shape import ShapeBox
 from ..kite.plant import PlantConfig
 
-__all__ = ["OracleResult", "plant_performance", "find_oracle", "DEFAULT_CACHE_DIR"]
+__all__ = ["OracleResult", "plant_performance", "find_oracle", "oracle_cache_dir", "CACHE_ENV"]
 
-DEFAULT_CACHE_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
-                                 "runs")
+CACHE_ENV = "KITE_RTO_CACHE"
+"""Environment variable naming the oracle cache directory (overrides the platform's user cache directory)."""
 _SPEC = ExperimentSpec(settle_time=40.0, settle_laps=1, n_laps=3, normalize=False)
 _MEMO: dict = {}
 
@@ -57,6 +61,14 @@ class OracleResult:
     key: str
 
 
+def oracle_cache_dir(cache_dir: str | os.PathLike | None = None) -> str:
+    """The oracle cache directory: ``cache_dir`` if given, else ``$KITE_RTO_CACHE`` if set and non-empty, else
+    ``platformdirs.user_cache_dir("kite_rto")``. Created when the first result is written."""
+    if cache_dir is not None:
+        return os.fspath(cache_dir)
+    return os.environ.get(CACHE_ENV) or user_cache_dir("kite_rto")
+
+
 def _key(config: PlantConfig, box: ShapeBox, h_min: float, spec: ExperimentSpec, grid: int) -> str:
     text = repr((config.without_disturbances(), box, h_min, spec, grid, "v1"))
     return hashlib.sha1(text.encode()).hexdigest()[:12]
@@ -64,7 +76,8 @@ def _key(config: PlantConfig, box: ShapeBox, h_min: float, spec: ExperimentSpec,
 
 def find_oracle(config: PlantConfig | None = None, box: ShapeBox | None = None, h_min: float = 100.0,
                 spec: ExperimentSpec = _SPEC, grid: int = 3, starts: int = 2, maxfev: int = 40,
-                penalty: float = 5.0, cache_dir: str | None = DEFAULT_CACHE_DIR) -> OracleResult:
+                penalty: float = 5.0, cache_dir: str | os.PathLike | None = None, cache: bool = True
+                ) -> OracleResult:
     """Maximize the deterministic plant's mean tension over ``box`` s.t. min altitude >= ``h_min`` (m).
 
     Args:
@@ -74,12 +87,15 @@ def find_oracle(config: PlantConfig | None = None, box: ShapeBox | None = None, 
         starts: Nelder–Mead runs, from the best feasible grid points.
         maxfev: evaluations per Nelder–Mead run.
         penalty: kN per metre of altitude violation.
-        cache_dir: JSON cache directory (None: no cache).
+        cache_dir: JSON cache directory; None: :func:`oracle_cache_dir` (``$KITE_RTO_CACHE``, else the
+            platform's user cache directory).
+        cache: read and write the cache (False: always compute, write nothing).
     """
     from scipy.optimize import minimize
     config = config or PlantConfig()
     box = box or ShapeBox()
     key = _key(config, box, h_min, spec, grid)
+    cache_dir = oracle_cache_dir(cache_dir) if cache else None
     path = None if cache_dir is None else os.path.join(cache_dir, f"oracle_{key}.json")
     if path and os.path.exists(path):
         with open(path) as f:

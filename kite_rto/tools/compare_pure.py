@@ -1,7 +1,7 @@
 """Check a run of the ROS graph against the pure runner: same experiments, costs and iterates, bit for bit.
 
 The optimizer's SQLite database holds every experiment (setpoints, measured cost and constraint) and every
-iteration. This re-flies the same number of iterations with :func:`~kite_rto.rto.session.run_kite_rto` on
+iteration. This re-flies the same number of iterations with :func:`~kite_rto.rto.runner.run_rto` on
 the default plant and settings (what the main job uses) with the given seed, and compares.
 
 Usage: ``python -m kite_rto.tools.compare_pure --db runs/demo/rto.sqlite [--seed 0]``; exit 0 when everything
@@ -15,7 +15,7 @@ import sys
 
 import numpy as np
 
-from ..rto.session import run_kite_rto
+from ..rto.runner import run_rto
 from ..kite.plant import PlantConfig
 from ..gma import History, HistoryStore
 
@@ -54,7 +54,7 @@ def main(argv=None) -> int:
     if graph is None or not graph.iterations:
         print(f"compare_pure: {args.db!r} holds no finished iteration", file=sys.stderr)
         return 2
-    pure = run_kite_rto(PlantConfig(), seed=args.seed, n_iter=len(graph.iterations)).history
+    pure = run_rto(PlantConfig(), seed=args.seed, n_iter=len(graph.iterations)).history
     diff = compare_histories(graph, pure)
     n_e, n_i = len(graph.experiments), len(graph.iterations)
     if diff:

@@ -9,7 +9,7 @@ from pathlib import Path
 import rclpy
 
 from ..gma import HistoryStore
-from ..rto.session import KiteRTOSettings
+from ..rto.settings import KiteRTOSettings
 from .demo_graph import plant_params, recorder_summary, ros_init, spin_until, start_recorder
 from .graph import NodeProcess, close_graph, stopped_by_signal
 from .progress import OptimizeProgress
@@ -47,7 +47,7 @@ def optimize(args, env, out: Path, progress) -> int:
             raise RuntimeError("the optimizer published no setpoints within 300 s")
         if not opt.alive():
             raise RuntimeError(f"the optimizer exited with code {opt.proc.returncode}; see {out / 'nodes.log'}")
-        # Synchronized with the optimizer: the graph flies the same sequence as the pure runner (run_kite_rto).
+        # Synchronized with the optimizer: the graph flies the same sequence as the pure runner (run_rto).
         ctrl = NodeProcess("controller", {"sync_optimizer": True}, log=log, env=env)
         procs.append(ctrl)
         spin_until(lambda: any("new setpoints" in ln for ln in ctrl.lines) or not ctrl.alive(), rec, 120)

@@ -9,7 +9,8 @@ import numpy as np
 from mcap.reader import make_reader
 from rclpy.serialization import deserialize_message
 
-from ..flight.path import Setpoints, shape_from_setpoints
+from ..flight.path import Setpoints
+from ..flight.shape import shape_from_setpoints
 from ..nodes import topics as T
 from ..nodes.common import joint_state_from_raw, stamp_to_ns
 from .record import TOPICS

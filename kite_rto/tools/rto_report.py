@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from mcap.exceptions import McapError
 
-from ..flight.path import ShapeBox, setpoints_from_shape
+from ..flight.shape import ShapeBox, setpoints_from_shape
 from ..gma import HistoryStore
 from ..kite.params import KiteParams
 from ..kite.plant import PlantConfig

@@ -1,0 +1,96 @@
+"""Make the kite's :class:`~kite_rto.gma.GMA`: the lap OCP in shape coordinates, its model-only optimum, the
+privileged directions, started at the model optimum.
+
+GMA works in shape coordinates ``x = (theta_0, A_phi, aspect)`` over a :class:`~kite_rto.flight.shape.ShapeBox`
+(every point of it is trackable; the trackable set is a curved band in setpoints). GMA's records hold ``x``;
+:func:`~kite_rto.flight.shape.setpoints_from_shape` turns them into setpoints ``c = (theta_0, A_phi, A_theta)``,
+rad. The OCP and the model optimum take seconds to build and solve, so they are cached per process.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from ..gma import GMA, PrivilegedDirections
+from ..flight.shape import ShapeBox, setpoints_from_shape, shape_from_setpoints
+from ..kite.params import KiteParams
+from .directions import privileged_directions_for
+from .ocp import KiteOCPSettings, model_problem
+from .settings import KiteRTOSettings
+
+__all__ = ["lap_problem", "ModelOptimum", "model_only_optimum", "gma_directions", "make_gma"]
+
+
+@lru_cache(maxsize=4)
+def lap_problem(box: ShapeBox = ShapeBox(), model_params: KiteParams = KiteParams(),
+                ocp: KiteOCPSettings = KiteOCPSettings()):
+    """The kite lap OCP in shape coordinates on ``box`` (cached per process: building it takes seconds)."""
+    return model_problem(model_params, ocp, c_lb=box.lower(), c_ub=box.upper(),
+                         c_guess=0.5 * (box.lower() + box.upper()), name="kite_lap", shape=True)
+
+
+@lru_cache(maxsize=4)
+def _model_optimum_cached(box, model_params, ocp) -> tuple:
+    from .ocp_solve import solve_model_optimum
+    pr = lap_problem(box, model_params, ocp)
+    sol = solve_model_optimum(pr)
+    x = np.clip(sol.c, box.lower(), box.upper())
+    i = pr.equalities.numel() + pr.inner_constraints.numel()
+    nu = np.maximum(sol.lam_g[i:i + pr.n_g], 0.0)        # multipliers of g(u) <= 0 at the model optimum
+    return (tuple(setpoints_from_shape(x).tolist()), sol.mean_tension_kn, sol.min_altitude, tuple(x.tolist()),
+            tuple(nu.tolist()))
+
+
+@dataclass(frozen=True)
+class ModelOptimum:
+    """The model's own optimum in a box (a failed solve raises :class:`~kite_rto.rto.ocp_solve.OCPSolveError`).
+
+    Attributes:
+        c: setpoints (theta_0, A_phi, A_theta), rad, shape (3,).
+        mean_tension_kn: the model's mean tension there, kN.
+        min_altitude: the model's lowest altitude over the lap, m.
+    """
+
+    c: np.ndarray
+    mean_tension_kn: float
+    min_altitude: float
+
+
+def model_only_optimum(box: ShapeBox = ShapeBox(), model_params: KiteParams = KiteParams(),
+                       ocp: KiteOCPSettings = KiteOCPSettings()) -> ModelOptimum:
+    """The :class:`ModelOptimum` in ``box`` (cached per process)."""
+    c, t, z, _, _ = _model_optimum_cached(box, model_params, ocp)
+    return ModelOptimum(np.array(c), t, z)
+
+
+def gma_directions(settings: KiteRTOSettings, model_params: KiteParams = KiteParams(),
+                   ocp: KiteOCPSettings = KiteOCPSettings()) -> PrivilegedDirections:
+    """The :class:`~kite_rto.gma.PrivilegedDirections` of ``settings`` (shape coordinates), computed at the
+    model optimum in ``settings.box`` (cached per process; 10.6 s the first time in `benchmarks/bench_ocp.py`)."""
+    _, _, _, x_opt, nu = _model_optimum_cached(settings.box, model_params, ocp)
+    return privileged_directions_for(settings.box, x_opt, nu, model_params, ocp, settings.uncertainty,
+                                     settings.n_directions)
+
+
+def make_gma(settings: KiteRTOSettings | None = None, model_params: KiteParams | None = None,
+             ocp: KiteOCPSettings | None = None, c0=None, history=None) -> GMA:
+    """A :class:`GMA` on the kite lap model in shape coordinates, started at setpoints ``c0`` (rad; default:
+    settings.c0, else the model optimum), or resumed from ``history``.
+
+    ``ocp.h_min`` must equal ``settings.experiment.h_min`` (the plant's and the model's constraint agree).
+    """
+    settings = settings or KiteRTOSettings()
+    model_params = model_params or KiteParams()
+    ocp = ocp or KiteOCPSettings(h_min=settings.experiment.h_min)
+    if abs(ocp.h_min - settings.experiment.h_min) > 1e-9:
+        raise ValueError(f"make_gma: KiteOCPSettings.h_min = {ocp.h_min!r} differs from "
+                         f"ExperimentSpec.h_min = {settings.experiment.h_min!r}")
+    problem = lap_problem(settings.box, model_params, ocp)
+    if c0 is None:
+        c0 = settings.c0 if settings.c0 is not None else model_only_optimum(settings.box, model_params, ocp).c
+    x0 = np.clip(shape_from_setpoints(c0), settings.box.lower(), settings.box.upper())
+    directions = gma_directions(settings, model_params, ocp).directions if settings.gradient == "directional" \
+        else None
+    return GMA(problem, settings.gma_settings(), settings.gradient_estimator(directions), c0=x0, history=history)
