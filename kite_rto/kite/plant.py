@@ -17,11 +17,19 @@ from .actuator import Actuator
 from .model import STEP_OUTPUT_NAMES, shared_model
 from .params import KiteParams, ParameterError, check_range
 from .wind import TurbulenceSettings, UniformGust, WindModel
+from .wind_field import FieldWind, MannBox, WindFieldSettings
 
-__all__ = ["PlantConfig", "NoiseSettings", "Measurement", "KitePlant", "PLANT_PARAMS"]
+__all__ = ["PlantConfig", "NoiseSettings", "Measurement", "KitePlant", "PLANT_PARAMS", "WIND_MODELS",
+           "DEFAULT_WIND_MODEL"]
 
 PLANT_PARAMS = KiteParams(E=4.6, c_E=2.0, g_s=0.035, shear=0.20)
 """Default 'real kite': lower glide ratio, glide loss when steering, weaker steering, stronger shear (SPEC §2)."""
+
+WIND_MODELS = ("uniform", "field")
+"""``PlantConfig.wind_model`` choices: one gust on the whole wind (:class:`~kite_rto.kite.wind.UniformGust`) or the
+3-D turbulent field (:class:`~kite_rto.kite.wind_field.FieldWind`)."""
+DEFAULT_WIND_MODEL = "uniform"
+"""The plant's wind model unless configured otherwise."""
 
 _isfinite = math.isfinite
 _MEASURED_OUTPUTS = ("tension", "x", "y", "z", "theta_dot", "phi_dot", "psi_dot")
@@ -59,9 +67,12 @@ class PlantConfig:
         substeps: RK4 steps per sample (>= 1).
         dead_time: steering dead time, s (>= 0; rounded to whole samples).
         rate_limit: steering rate limit, 1/s of normalized delta (> 0).
-        turbulence: :class:`~kite_rto.kite.wind.TurbulenceSettings`.
+        turbulence: :class:`~kite_rto.kite.wind.TurbulenceSettings` (with ``wind_model = "field"`` only its
+            ``enabled`` and ``anemometer_noise`` apply).
         noise: :class:`NoiseSettings`.
         launch_state: (theta, phi, psi) in rad after start and after every crash.
+        wind_model: one of :data:`WIND_MODELS`; turbulence disabled means a steady wind with either.
+        wind_field: :class:`~kite_rto.kite.wind_field.WindFieldSettings` of the ``"field"`` model.
     """
 
     params: KiteParams = PLANT_PARAMS
@@ -72,9 +83,13 @@ class PlantConfig:
     turbulence: TurbulenceSettings = field(default_factory=TurbulenceSettings)
     noise: NoiseSettings = field(default_factory=NoiseSettings)
     launch_state: tuple = (math.radians(30.0), 0.0, 0.0)
+    wind_model: str = DEFAULT_WIND_MODEL
+    wind_field: WindFieldSettings = field(default_factory=WindFieldSettings)
 
     def __post_init__(self):
         n = type(self).__name__
+        if self.wind_model not in WIND_MODELS:
+            raise ParameterError(f"{n}.wind_model = {self.wind_model!r}: expected one of {', '.join(WIND_MODELS)}")
         check_range(n, "dt", self.dt, 0.0, 0.1, low_open=True)
         if isinstance(self.substeps, bool) or not isinstance(self.substeps, int) or self.substeps < 1:
             raise ParameterError(f"{n}.substeps = {self.substeps!r}: expected an integer >= 1")
@@ -88,10 +103,19 @@ class PlantConfig:
         check_range(n, "launch_state[psi]", psi, -math.pi, math.pi)
 
     def without_disturbances(self) -> "PlantConfig":
-        """The same kite with no turbulence and no measurement noise (the turbulence settings are reset to
-        their defaults, which have no effect when disabled, so equal kites compare equal)."""
+        """The same kite with no turbulence and no measurement noise (the wind settings are reset to their
+        defaults, which have no effect when turbulence is disabled, so equal kites compare equal)."""
         return replace(self, turbulence=TurbulenceSettings(enabled=False, anemometer_noise=0.0),
-                       noise=NoiseSettings(0.0, 0.0, 0.0))
+                       noise=NoiseSettings(0.0, 0.0, 0.0), wind_model=DEFAULT_WIND_MODEL,
+                       wind_field=WindFieldSettings())
+
+    def make_wind(self, seed: int, rng: np.random.Generator) -> WindModel:
+        """The :class:`~kite_rto.kite.wind.WindModel` this configuration describes, for plant seed ``seed`` (the
+        field's box seed) and the wind's own random stream ``rng``."""
+        if self.wind_model == "field" and self.turbulence.enabled:
+            box = MannBox(self.wind_field, self.wind_field.sigma(self.params), seed)
+            return FieldWind(box, self.params, self.turbulence.anemometer_noise, rng)
+        return UniformGust(self.turbulence, self.params.w_ref, rng)
 
 
 @dataclass(frozen=True)
@@ -153,8 +177,7 @@ class KitePlant:
         self.model = shared_model()
         self.dt = self.config.dt
         gust_ss, noise_ss = np.random.SeedSequence(self.seed).spawn(2)
-        self.wind: WindModel = UniformGust(self.config.turbulence, self.config.params.w_ref,
-                                           np.random.default_rng(gust_ss))
+        self.wind = self.config.make_wind(self.seed, np.random.default_rng(gust_ss))
         self._noise_rng = np.random.default_rng(noise_ss)
         self._p = self.config.params.as_vector()
         self._i_wref = KiteParams.names().index("w_ref")
