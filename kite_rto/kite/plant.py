@@ -205,6 +205,12 @@ class KitePlant:
         """The latest measurement (the one returned by the last :meth:`step`)."""
         return self._last
 
+    @property
+    def kite_wind(self) -> float:
+        """The reference wind the kite flew in during the last step, m/s at ``z_ref`` (the truth: the wind at the
+        kite is ``kite_wind (z / z_ref)^shear``; not a measurement, for benchmarks and tests)."""
+        return self._p[self._i_wref]
+
     def step(self, delta: float) -> Measurement:
         """Send steering command ``delta`` (clipped to [-1, 1]; NaN counts as 0) and advance one sample."""
         # Hot path (tens of thousands of calls per simulated hour): locals, no per-call NumPy, no helper calls.

@@ -51,6 +51,16 @@ _CACHE_ENV = "KITE_RTO_CACHE"
 _FORMAT = "v1"          # part of the cache key: change it when the generation or scaling changes
 
 
+def _cell(f: float, n: int) -> tuple:
+    """Lower grid index and fraction of the fractional index ``f`` on an axis of ``n`` points, clamped to it."""
+    if f <= 0.0:
+        return 0, 0.0
+    if f >= n - 1:
+        return n - 2, 1.0
+    i = int(f)
+    return i, f - i
+
+
 def iec_coherence(f, separation: float, mean_wind: float, scale: float = IEC_COHERENCE_SCALE):
     """IEC 61400-1 exponential coherence of the longitudinal component, ``exp(-12 sqrt((f r/V)^2 + (0.12 r/L_c)^2))``.
 
@@ -220,22 +230,8 @@ class FieldWind(WindModel):
         ax = fx - fl
         i0 = int(fl) % nx
         i1 = i0 + 1 if i0 + 1 < nx else 0
-        fy = (y - self._y0) * iy_
-        if fy <= 0.0:
-            j, ay = 0, 0.0
-        elif fy >= ny - 1:
-            j, ay = ny - 2, 1.0
-        else:
-            j = int(fy)
-            ay = fy - j
-        fz = z * iz_
-        if fz <= 0.0:
-            k, az = 0, 0.0
-        elif fz >= nz - 1:
-            k, az = nz - 2, 1.0
-        else:
-            k = int(fz)
-            az = fz - k
+        j, ay = _cell((y - self._y0) * iy_, ny)
+        k, az = _cell(z * iz_, nz)
         u, nyz = self._flat, ny * nz
         a = i0 * nyz + j * nz + k
         b = i1 * nyz + j * nz + k
