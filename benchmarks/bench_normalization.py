@@ -32,7 +32,7 @@ import numpy as np
 from kite_rto.kite.model import shared_model
 from kite_rto.kite.params import KiteParams
 from kite_rto.kite.plant import WIND_MODELS, PlantConfig
-from kite_rto.kite.wind_estimate import WindObserver, tension_wind
+from kite_rto.kite.wind_estimate import WindObserver, WindObserverSettings, tension_wind
 from kite_rto.rto.experiment import ExperimentSpec, PlantFlight
 from kite_rto.rto.oracle import plant_performance
 
@@ -43,9 +43,9 @@ METHODS = ("raw", "anemometer", "anemo+lag", "observer", "tension")
 class RecordingPlant:
     """A plant that records, per sample, t, tension, anemometer, kite x and z, and the two kite wind estimates."""
 
-    def __init__(self, plant, model_params: KiteParams):
+    def __init__(self, plant, model_params: KiteParams, observer: WindObserverSettings):
         self.plant, self.params, self.dt = plant, model_params, plant.dt
-        self.observer = WindObserver(model_params, plant.dt)
+        self.observer = WindObserver(model_params, plant.dt, observer)
         self.rows: list = []
 
     @property
@@ -90,6 +90,8 @@ def main(argv=None) -> int:
     ap.add_argument("--dA", type=float, default=4.0, help="A_phi difference, deg")
     ap.add_argument("--laps", type=int, default=4)
     ap.add_argument("--wind-model", choices=WIND_MODELS, default="field")
+    ap.add_argument("--observer-tau", type=float, default=WindObserverSettings().time_constant,
+                    help="time constant of the wind observer, s")
     ap.add_argument("--anemometer-correlation", type=float, default=None,
                     help="uniform wind only: anemometer gust correlation (default: PlantConfig's, 1)")
     args = ap.parse_args(argv)
@@ -108,7 +110,8 @@ def main(argv=None) -> int:
     lags = []
     for seed in range(args.seeds):
         fl = PlantFlight(config, seed, spec, c0=ca)
-        fl.plant = recorder = RecordingPlant(fl.plant, model_params)
+        fl.plant = recorder = RecordingPlant(fl.plant, model_params,
+                                             WindObserverSettings(time_constant=args.observer_tau))
         outcomes = [(fl.fly(ca), fl.fly(cb)) for _ in range(args.pairs)]
         rec = np.array(recorder.rows)
         u_kite = np.mean(rec[:, 2]) * (np.mean(rec[:, 4]) / model_params.z_ref) ** model_params.shear
@@ -127,7 +130,7 @@ def main(argv=None) -> int:
             f"uniform gust, anemometer correlation {config.turbulence.anemometer_correlation:g}")
     print(f"bench_normalization: {args.seeds} seeds x {args.pairs} pairs, c_a = (30, 44, 7) deg, "
           f"dA_phi = {args.dA:g} deg, {args.laps} laps/experiment, wind: {wind}; transport lag "
-          f"{np.mean(lags):.1f} s; {time.perf_counter() - t0:.0f} s wall")
+          f"{np.mean(lags):.1f} s; observer tau {args.observer_tau:g} s; {time.perf_counter() - t0:.0f} s wall")
     print(f"deterministic plant: T(c_a) = {ta:.1f} kN, forward-difference dT/dA_phi = {true_grad:.2f} kN/deg")
     head = f"{'quantity':40} " + " ".join(f"{k:>10}" for k in METHODS)
     print(head)
