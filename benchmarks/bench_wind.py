@@ -108,7 +108,8 @@ def main(argv=None) -> int:
     fs = config.wind_field
     t0 = time.perf_counter()
     print(f"bench_wind: {args.seeds} seeds x {args.duration:g} s, IEC 61400-1 class {fs.turbulence_class}, hub "
-          f"{fs.hub_height:g} m, U_hub {fs.hub_wind(config.params):.2f} m/s, sigma_1 {fs.sigma(config.params):.2f} m/s, "
+          f"{fs.hub_height:g} m, U_hub {fs.hub_wind(config.params):.2f} m/s, "
+          f"sigma_1 {fs.sigma(config.params):.2f} m/s, "
           f"Mann L {fs.length_scale:g} m, Gamma {fs.gamma:g}, box {fs.points} x {fs.spacing} m")
     head = (f"{'seed':>4} {'TI kite turb':>12} {'TI kite total':>13} {'TI anemo':>9} {'corr lag 0':>10} "
             f"{'best corr':>9} {'best lag s':>10} {'x/U_hub s':>9} {'alpha-eps':>9} {'crashes':>7}")

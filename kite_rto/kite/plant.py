@@ -1,9 +1,11 @@
 """The simulated 'real' kite: the Erhard model plus everything that makes a real kite differ from it.
 
 Mismatch against the nominal model (SPEC §2): its own parameter values (E, g_s, shear, ...), glide loss when
-steering (E = E0 - c_E delta^2), steering dead time and rate limit, turbulence, measurement noise. Fixed-step RK4
-integration of the shared CasADi model (evaluated through its pure-Python translation). A crash (altitude
-<= 0 or a non-finite state) is counted and followed by a relaunch from the launch state; no NaN ever leaves.
+steering (E = E0 - c_E delta^2), steering dead time and rate limit (``actuator.py``), turbulence (a uniform gust,
+``wind.py``, or a 3-D field the kite and the anemometer sample at their own positions, ``wind_field.py``),
+measurement noise. Fixed-step RK4 integration of the shared CasADi model (evaluated through its pure-Python
+translation). A crash (altitude <= 0 or a non-finite state) is counted and followed by a relaunch from the launch
+state; no NaN ever leaves.
 """
 from __future__ import annotations
 
@@ -213,7 +215,8 @@ class KitePlant:
 
     def step(self, delta: float) -> Measurement:
         """Send steering command ``delta`` (clipped to [-1, 1]; NaN counts as 0) and advance one sample."""
-        # Hot path (tens of thousands of calls per simulated hour): locals, no per-call NumPy, no helper calls.
+        # Hot path (tens of thousands of calls per simulated hour): locals, no per-call NumPy, three calls (actuator,
+        # wind advance, wind at the kite).
         d = float(delta)
         if d != d:
             d = 0.0
@@ -227,7 +230,7 @@ class KitePlant:
         wind = self.wind
         wind.advance(t)
         p = self._p
-        p[self._i_wref] = wind.kite_reference_wind(self._last.position)
+        p[self._i_wref] = wind.kite_reference_wind(self._last.position)     # at the step's start position
         x = self.state
         h, step_py = self._h, self._step_py
         for _ in self._substeps:
