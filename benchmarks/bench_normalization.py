@@ -57,12 +57,11 @@ class RecordingPlant:
 
     def step(self, delta: float):
         m = self.plant.step(delta)
-        self.observer.update(m)
+        observed = self.observer.observe(m)
         z = m.position[2]
         w_tension = tension_wind(shared_model(), self.params, m.theta, m.phi, m.tension)
         ref = (self.params.z_ref / max(z, 0.5)) ** self.params.shear      # wind at the kite -> at z_ref
-        self.rows.append((m.t, m.tension, m.wind_ref, m.position[0], z, self.observer.reference_wind(z),
-                          w_tension * ref))
+        self.rows.append((m.t, m.tension, m.wind_ref, m.position[0], z, observed, w_tension * ref))
         return m
 
 

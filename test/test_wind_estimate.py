@@ -47,6 +47,9 @@ def test_observer_recovers_the_wind_of_a_mismatched_kite_flying_a_figure_eight()
             assert est == pytest.approx(num / den, rel=1e-9)
             assert est == pytest.approx(wind, rel=0.1)           # lags a fast altitude sweep by a few %
     assert obs.reference_wind(100.0) == pytest.approx(obs.wind / (100.0 / 10.0) ** 0.15)
+    m.position = (300.0, 0.0, 120.0)
+    observed = obs.observe(m)
+    assert observed == pytest.approx(obs.wind / (120.0 / 10.0) ** 0.15)
 
 
 def test_observer_is_unbiased_under_rate_noise_and_follows_a_step():

@@ -110,6 +110,12 @@ class WindObserver:
             self.wind = self._shy / self._shh
         return self.wind
 
+    def observe(self, m) -> float:
+        """:meth:`update` with measurement ``m`` (also ``position``), then the estimate at z_ref, m/s: what a
+        tension normalization uses in place of the anemometer's ``wind_ref``."""
+        self.update(m)
+        return self.reference_wind(m.position[2])
+
     def reference_wind(self, altitude: float) -> float:
         """The estimate brought to ``z_ref`` through the model's power law, m/s (kite at ``altitude`` m)."""
         p = self.params
