@@ -269,7 +269,7 @@ class PathController:
             self._wind_scale = min(max(self._wind_scale * (1.0 + a * (ratio - 1.0)), 0.3), 3.0)
         if st.gain_filter > 0:
             y = m.psi_dot - m.phi_dot * math.cos(m.theta)       # measured geodesic turn rate, rad/s
-            u = w_ap * self.params.g_s * self._actuator.applied           # model's prediction with gain 1
+            u = w_ap * self.params.g_s * self._actuator.applied  # model's prediction with gain 1
             f = math.exp(-st.dt / st.gain_filter)
             self._gain_num = f * self._gain_num + y * u
             self._gain_den = f * self._gain_den + u * u

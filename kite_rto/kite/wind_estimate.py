@@ -36,10 +36,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .model import MIN_WIND_HEIGHT, KiteModel
+from .model import MIN_WIND_HEIGHT, STEP_OUTPUT_NAMES, KiteModel
 from .params import KiteParams, check_range
 
 __all__ = ["WindObserverSettings", "WindObserver", "drift_measurement", "tension_wind"]
+
+_TENSION = STEP_OUTPUT_NAMES.index("tension")
 
 
 def drift_measurement(theta: float, psi: float, theta_dot: float, phi_dot: float, r: float) -> tuple:
@@ -55,7 +57,7 @@ def tension_wind(model: KiteModel, params: KiteParams, theta: float, phi: float,
     z = params.r * math.sin(theta) * math.cos(phi)
     p = params.as_vector()
     p[KiteParams.names().index("w_ref")] = (params.z_ref / max(z, MIN_WIND_HEIGHT)) ** params.shear   # w = 1 at z
-    unit = model.step_py([theta, phi, 0.0], 0.0, p, 0.0)[1][0]
+    unit = model.step_py([theta, phi, 0.0], 0.0, p, 0.0)[1][_TENSION]
     return math.sqrt(max(tension, 0.0) / unit)
 
 
