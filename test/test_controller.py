@@ -11,7 +11,8 @@ from kite_rto.flight.controller import ControllerSettings, PathController
 from kite_rto.kite.params import KiteParams, ParameterError
 from kite_rto.flight.path import DEFAULT_SETPOINTS, SetpointBox, SetpointError, Setpoints
 from kite_rto.flight.shape import ShapeBox
-from kite_rto.kite.plant import PlantConfig, shared_model
+from kite_rto.kite.model import shared_model
+from kite_rto.kite.plant import PlantConfig
 
 QUIET = PlantConfig().without_disturbances()
 

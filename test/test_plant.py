@@ -7,7 +7,7 @@ import pytest
 
 from kite_rto.kite import KiteParams, ParameterError
 from kite_rto.kite.plant import KitePlant, NoiseSettings, PlantConfig
-from kite_rto.kite.wind import Turbulence, TurbulenceSettings
+from kite_rto.kite.wind import TurbulenceSettings, UniformGust
 
 
 def fly(plant, commands):
@@ -66,7 +66,7 @@ def test_crash_is_detected_counted_and_relaunched():
 
 def test_turbulence_statistics_match_settings():
     s = TurbulenceSettings()
-    turb = Turbulence(s, 8.0, np.random.default_rng(0))
+    turb = UniformGust(s, 8.0, np.random.default_rng(0))
     gusts = []
     for k in range(1, 200000):
         turb.advance(k * s.update_period)
@@ -79,11 +79,11 @@ def test_turbulence_statistics_match_settings():
 
 
 def test_anemometer_is_correlated_with_kite_gust():
-    plant = KitePlant(seed=3)
+    plant = KitePlant(PlantConfig(wind_model="uniform"), seed=3)
     ref, anemo = [], []
     for _ in range(30000):
         m = plant.step(0.0)
-        ref.append(plant.turbulence.reference_wind())
+        ref.append(plant.wind.kite_reference_wind(m.position))
         anemo.append(m.wind_ref)
     assert np.corrcoef(ref, anemo)[0, 1] > 0.85
 
@@ -109,3 +109,26 @@ def test_invalid_plant_config(kwargs, field):
 def test_glide_loss_must_leave_positive_E():
     with pytest.raises(ParameterError, match="c_E"):
         KiteParams(E=2.0, c_E=2.0)
+
+
+def test_uniform_gust_draws_the_generator_stream_in_order():
+    """Block-drawn normals = one ``rng`` call per draw: the gust recursion written out with per-draw calls."""
+    s = replace(TurbulenceSettings(), anemometer_correlation=0.9)
+    gust = UniformGust(s, 8.0, np.random.default_rng(5))
+    rng = np.random.default_rng(5)
+    sigma = s.intensity * 8.0
+    a = math.exp(-s.update_period / (s.length_scale / 8.0))
+    b = sigma * math.sqrt(1.0 - a**2)
+    g, own = float(rng.normal(0.0, sigma)), float(rng.normal(0.0, sigma))
+    next_update = s.update_period
+    for k in range(1, 3000):
+        t = k * 0.02
+        gust.advance(t)
+        while t >= next_update - 1e-12:
+            n1, n2 = rng.standard_normal(2).tolist()
+            g, own = a * g + b * n1, a * own + b * n2
+            next_update += s.update_period
+        mixed = 0.9 * g + math.sqrt(1.0 - 0.9**2) * own
+        expected = max(8.0 + mixed + float(rng.normal(0.0, s.anemometer_noise)), 0.0)
+        assert gust.kite_reference_wind((0.0, 0.0, 100.0)) == max(8.0 + g, 0.1)
+        assert gust.anemometer() == expected

@@ -13,7 +13,8 @@ from .controller import ControllerSettings, PathController
 from .laps import LapDetector, LapStats
 from ..kite.params import KiteParams
 from .path import DEFAULT_SETPOINTS, Setpoints
-from ..kite.plant import KitePlant, PlantConfig, shared_model
+from ..kite.model import shared_model
+from ..kite.plant import KitePlant, PlantConfig
 
 __all__ = ["ClosedLoopResult", "run_closed_loop", "make_closed_loop"]
 

@@ -23,9 +23,9 @@ applied by blending the setpoints linearly over ``blend_time`` seconds: the refe
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass, field, replace
 
+from ..kite.actuator import Actuator, step_toward
 from ..kite.model import KiteModel
 from ..kite.params import KiteParams, check_range
 from .path import DEFAULT_TURN_MARGIN, FigureEightPath, SetpointBox, Setpoints, SetpointError, validate_setpoints
@@ -134,9 +134,7 @@ class PathController:
         self.path = FigureEightPath(self._c)
         self._p = model_params.as_vector()
         self._i_wref = KiteParams.names().index("w_ref")
-        self._n_delay = round(st.dead_time / st.dt)
-        self._sent = deque([0.0] * self._n_delay)   # commands in the actuator's delay line, oldest first
-        self._applied = 0.0                          # actuator output after rate limit (own estimate)
+        self._actuator = Actuator(st.dead_time, st.rate_limit, st.dt)   # own copy of the kite's actuator
         self._last_cmd = 0.0
         self._s = None
         self._s_pred = None
@@ -210,10 +208,7 @@ class PathController:
 
         # 1. dead-time prediction with the commands in flight
         x = [theta, phi, psi]
-        applied = self._applied
-        max_change = st.rate_limit * st.dt
-        for u in self._sent:
-            applied += min(max(u - applied, -max_change), max_change)
+        for applied in self._actuator.pending():
             x = self.model.step_py(x, applied, p, st.dt)[0]
         th_p, ph_p, psi_p = x
 
@@ -244,28 +239,20 @@ class PathController:
         # 4. saturation, rate limit, anti-windup
         sat = abs(u) >= st.delta_max
         u = min(max(u, -st.delta_max), st.delta_max)
-        u = self._last_cmd + min(max(u - self._last_cmd, -max_change), max_change)
+        u = step_toward(self._last_cmd, u, self._actuator.max_change)
         if not sat or (self._int * e < 0):
             self._int = min(max(self._int + e * st.dt, -st.integral_limit), st.integral_limit)
         self._last_cmd = u
-        self._push(u)
+        self._actuator.push(u)
         s = self.status
         s.s, s.cross_track, s.s_pred, s.cross_track_pred = cp_now.s, cp_now.cross_track, cp.s, e
         s.delta, s.saturated, s.wind_scale, s.gain_scale = u, sat, self._wind_scale, self._gain_scale
         s.setpoints = path.setpoints
         return u
 
-    def _push(self, u: float) -> None:
-        """Record the command sent and advance the own actuator model by one sample."""
-        max_change = self.settings.rate_limit * self.settings.dt
-        if self._n_delay:
-            self._sent.append(u)
-            u = self._sent.popleft()
-        self._applied += min(max(u - self._applied, -max_change), max_change)
-
     def _w_ap_and_speed(self, x, p):
         """Model apparent wind w_ap (m/s) and kite speed (m/s) at state x with the current parameters p."""
-        xdot, (w_ap, _wind) = self.model.rhs_py(x, self._applied, p)
+        xdot, (w_ap, _wind) = self.model.rhs_py(x, self._actuator.applied, p)
         speed = self.params.r * math.hypot(xdot[0], math.sin(x[0]) * xdot[1])
         return w_ap, speed
 
@@ -273,7 +260,7 @@ class PathController:
         """Update the wind-scale (speed ratio) and steering-gain estimates from the measured rates."""
         st = self.settings
         x = [m.theta, m.phi, m.psi]
-        xdot, (w_ap, _wind) = self.model.rhs_py(x, self._applied, self._p)
+        xdot, (w_ap, _wind) = self.model.rhs_py(x, self._actuator.applied, self._p)
         v_model = math.hypot(xdot[0], math.sin(m.theta) * xdot[1])
         v_meas = math.hypot(m.theta_dot, math.sin(m.theta) * m.phi_dot)
         if v_model > 1e-3:
@@ -282,7 +269,7 @@ class PathController:
             self._wind_scale = min(max(self._wind_scale * (1.0 + a * (ratio - 1.0)), 0.3), 3.0)
         if st.gain_filter > 0:
             y = m.psi_dot - m.phi_dot * math.cos(m.theta)       # measured geodesic turn rate, rad/s
-            u = w_ap * self.params.g_s * self._applied           # model's prediction with gain 1
+            u = w_ap * self.params.g_s * self._actuator.applied  # model's prediction with gain 1
             f = math.exp(-st.dt / st.gain_filter)
             self._gain_num = f * self._gain_num + y * u
             self._gain_den = f * self._gain_den + u * u

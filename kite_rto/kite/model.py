@@ -17,9 +17,13 @@ import numpy as np
 from .params import KiteParams
 from .pyfunc import to_python
 
-__all__ = ["KiteModel", "STATE_NAMES", "MIN_WIND_HEIGHT"]
+__all__ = ["KiteModel", "STATE_NAMES", "OUTPUT_NAMES", "STEP_OUTPUT_NAMES", "MIN_WIND_HEIGHT", "shared_model"]
 
 STATE_NAMES = ("theta", "phi", "psi")
+OUTPUT_NAMES = ("tension", "altitude", "w_ap", "x", "y", "z")
+"""Outputs of ``f_outputs``, in order: line tension N, altitude m, apparent wind w_ap m/s, position x, y, z m."""
+STEP_OUTPUT_NAMES = OUTPUT_NAMES + ("theta_dot", "phi_dot", "psi_dot")
+"""Second result of ``step_py``, in order: :data:`OUTPUT_NAMES` then the state derivative, rad/s."""
 MIN_WIND_HEIGHT = 0.5
 """Heights below this (m) use the wind of this height, so the power law stays defined at the ground."""
 
@@ -27,6 +31,17 @@ MIN_WIND_HEIGHT = 0.5
 def _unpack(p):
     names = KiteParams.names()
     return {n: p[i] for i, n in enumerate(names)}
+
+
+_MODEL = None
+
+
+def shared_model() -> "KiteModel":
+    """One :class:`KiteModel` per process (building it compiles the CasADi graphs once)."""
+    global _MODEL
+    if _MODEL is None:
+        _MODEL = KiteModel()
+    return _MODEL
 
 
 @dataclass(frozen=True)
@@ -44,13 +59,20 @@ class KiteExpressions:
     w_ap: ca.SX         # apparent wind projected normal to the tether, m/s
     glide: ca.SX        # effective glide ratio E - c_E delta^2
 
+    def named(self, names) -> ca.SX:
+        """The outputs called ``names`` (from :data:`STEP_OUTPUT_NAMES`) stacked in that order."""
+        by_name = {"tension": self.tension, "altitude": self.altitude, "w_ap": self.w_ap,
+                   "x": self.position[0], "y": self.position[1], "z": self.position[2],
+                   "theta_dot": self.rhs[0], "phi_dot": self.rhs[1], "psi_dot": self.rhs[2]}
+        return ca.vertcat(*[by_name[n] for n in names])
+
 
 class KiteModel:
     """The kite equations as CasADi expressions and compiled numeric functions.
 
     Numeric functions (all take ``x`` shape (3,), ``delta`` scalar, ``p`` shape (n_p,)):
       * ``f_rhs(x, delta, p) -> xdot`` (rad/s)
-      * ``f_outputs(x, delta, p) -> [tension N, altitude m, w_ap m/s, px, py, pz m]``
+      * ``f_outputs(x, delta, p) -> y``, the outputs :data:`OUTPUT_NAMES`
       * ``f_step(x, delta, p, dt) -> x_next``: one classical RK4 step of ``dt`` seconds.
     and their pure-Python translations ``step_py`` / ``rhs_py`` for per-sample use in loops.
     """
@@ -62,8 +84,7 @@ class KiteModel:
         self.expr = self.expressions(ca.SX.sym("x", 3), ca.SX.sym("delta"), ca.SX.sym("p", self.n_p))
         e = self.expr
         self.f_rhs = ca.Function("kite_rhs", [e.x, e.delta, e.p], [e.rhs], ["x", "delta", "p"], ["xdot"])
-        outputs = ca.vertcat(e.tension, e.altitude, e.w_ap, e.position)
-        self.f_outputs = ca.Function("kite_outputs", [e.x, e.delta, e.p], [outputs],
+        self.f_outputs = ca.Function("kite_outputs", [e.x, e.delta, e.p], [e.named(OUTPUT_NAMES)],
                                      ["x", "delta", "p"], ["y"])
         dt = ca.SX.sym("dt")
         x_next = self.rk4(self.f_rhs, e.x, e.delta, e.p, dt)
@@ -71,10 +92,9 @@ class KiteModel:
                                   ["x", "delta", "p", "dt"], ["x_next"])
         # Fast pure-Python translations of the same graphs (see pyfunc.py for why).
         after = self.expressions(x_next, e.delta, e.p)
-        step_out = ca.cse([x_next, ca.vertcat(after.tension, after.altitude, after.w_ap, after.position,
-                                                after.rhs)])
+        step_out = ca.cse([x_next, after.named(STEP_OUTPUT_NAMES)])
         self.step_py = to_python(ca.Function("kite_step_py", [e.x, e.delta, e.p, dt], step_out))
-        """``step_py(x, delta, p, dt) -> (x_next[3], [tension, altitude, w_ap, px, py, pz, xdot[3]] at x_next)``,
+        """``step_py(x, delta, p, dt) -> (x_next[3], outputs :data:`STEP_OUTPUT_NAMES` at x_next)``,
         plain Python floats/lists; one RK4 step with the input held."""
         self.rhs_py = to_python(ca.Function("kite_rhs_py", [e.x, e.delta, e.p],
                                             ca.cse([e.rhs, ca.vertcat(e.w_ap, e.wind)])))
@@ -114,8 +134,9 @@ class KiteModel:
 
     def outputs(self, x, delta, params: KiteParams) -> dict:
         """Tension (N), altitude (m), apparent wind w_ap (m/s) and Cartesian position (m)."""
-        y = np.asarray(self.f_outputs(x, delta, params.as_vector())).ravel()
-        return {"tension": y[0], "altitude": y[1], "w_ap": y[2], "position": y[3:6]}
+        y = dict(zip(OUTPUT_NAMES, np.asarray(self.f_outputs(x, delta, params.as_vector())).ravel()))
+        return {"tension": y["tension"], "altitude": y["altitude"], "w_ap": y["w_ap"],
+                "position": np.array([y["x"], y["y"], y["z"]])}
 
     def zenith_equilibrium(self, params: KiteParams, psi: float = 0.0) -> float:
         """theta (rad) at which a kite held at orientation ``psi`` with delta = 0 settles: atan(E cos psi)."""

@@ -1,37 +1,43 @@
 """The simulated 'real' kite: the Erhard model plus everything that makes a real kite differ from it.
 
 Mismatch against the nominal model (SPEC §2): its own parameter values (E, g_s, shear, ...), glide loss when
-steering (E = E0 - c_E delta^2), steering dead time and rate limit, turbulence, measurement noise. Fixed-step RK4
-integration of the shared CasADi model (evaluated through its pure-Python translation). A crash (altitude
-<= 0 or a non-finite state) is counted and followed by a relaunch from the launch state; no NaN ever leaves.
+steering (E = E0 - c_E delta^2), steering dead time and rate limit (``actuator.py``), turbulence (a uniform gust,
+``wind.py``, or a 3-D field the kite and the anemometer sample at their own positions, ``wind_field.py``),
+measurement noise. Fixed-step RK4 integration of the shared CasADi model (evaluated through its pure-Python
+translation). A crash (altitude <= 0 or a non-finite state) is counted and followed by a relaunch from the launch
+state; no NaN ever leaves.
 """
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass, field, replace
+from operator import itemgetter
 
 import numpy as np
 
-from .model import KiteModel
+from .actuator import Actuator
+from .model import STEP_OUTPUT_NAMES, shared_model
 from .params import KiteParams, ParameterError, check_range
-from .wind import Turbulence, TurbulenceSettings
+from .wind import TurbulenceSettings, UniformGust, WindModel
+from .wind_field import FieldWind, MannBox, WindFieldSettings
 
-__all__ = ["PlantConfig", "NoiseSettings", "Measurement", "KitePlant", "PLANT_PARAMS"]
+__all__ = ["PlantConfig", "NoiseSettings", "Measurement", "KitePlant", "PLANT_PARAMS", "WIND_MODELS",
+           "DEFAULT_WIND_MODEL"]
 
 PLANT_PARAMS = KiteParams(E=4.6, c_E=2.0, g_s=0.035, shear=0.20)
 """Default 'real kite': lower glide ratio, glide loss when steering, weaker steering, stronger shear (SPEC §2)."""
 
-_MODEL = None
+WIND_MODELS = ("uniform", "field")
+"""``PlantConfig.wind_model`` choices: one gust on the whole wind (:class:`~kite_rto.kite.wind.UniformGust`) or the
+3-D turbulent field (:class:`~kite_rto.kite.wind_field.FieldWind`)."""
+DEFAULT_WIND_MODEL = "uniform"
+"""The plant's wind model unless configured otherwise."""
+
 _isfinite = math.isfinite
-
-
-def shared_model() -> KiteModel:
-    """One :class:`KiteModel` per process (building it compiles the CasADi graphs once)."""
-    global _MODEL
-    if _MODEL is None:
-        _MODEL = KiteModel()
-    return _MODEL
+_MEASURED_OUTPUTS = ("tension", "x", "y", "z", "theta_dot", "phi_dot", "psi_dot")
+_measured = itemgetter(*(STEP_OUTPUT_NAMES.index(n) for n in _MEASURED_OUTPUTS))
+"""``step_py`` outputs -> the tuple :data:`_MEASURED_OUTPUTS` (one C call, by name)."""
+_ALTITUDE = STEP_OUTPUT_NAMES.index("altitude")
 
 
 @dataclass(frozen=True)
@@ -63,9 +69,12 @@ class PlantConfig:
         substeps: RK4 steps per sample (>= 1).
         dead_time: steering dead time, s (>= 0; rounded to whole samples).
         rate_limit: steering rate limit, 1/s of normalized delta (> 0).
-        turbulence: :class:`~kite_rto.kite.wind.TurbulenceSettings`.
+        turbulence: :class:`~kite_rto.kite.wind.TurbulenceSettings` (with ``wind_model = "field"`` only its
+            ``enabled`` and ``anemometer_noise`` apply).
         noise: :class:`NoiseSettings`.
         launch_state: (theta, phi, psi) in rad after start and after every crash.
+        wind_model: one of :data:`WIND_MODELS`; turbulence disabled means a steady wind with either.
+        wind_field: :class:`~kite_rto.kite.wind_field.WindFieldSettings` of the ``"field"`` model.
     """
 
     params: KiteParams = PLANT_PARAMS
@@ -76,9 +85,13 @@ class PlantConfig:
     turbulence: TurbulenceSettings = field(default_factory=TurbulenceSettings)
     noise: NoiseSettings = field(default_factory=NoiseSettings)
     launch_state: tuple = (math.radians(30.0), 0.0, 0.0)
+    wind_model: str = DEFAULT_WIND_MODEL
+    wind_field: WindFieldSettings = field(default_factory=WindFieldSettings)
 
     def __post_init__(self):
         n = type(self).__name__
+        if self.wind_model not in WIND_MODELS:
+            raise ParameterError(f"{n}.wind_model = {self.wind_model!r}: expected one of {', '.join(WIND_MODELS)}")
         check_range(n, "dt", self.dt, 0.0, 0.1, low_open=True)
         if isinstance(self.substeps, bool) or not isinstance(self.substeps, int) or self.substeps < 1:
             raise ParameterError(f"{n}.substeps = {self.substeps!r}: expected an integer >= 1")
@@ -92,10 +105,19 @@ class PlantConfig:
         check_range(n, "launch_state[psi]", psi, -math.pi, math.pi)
 
     def without_disturbances(self) -> "PlantConfig":
-        """The same kite with no turbulence and no measurement noise (the turbulence settings are reset to
-        their defaults, which have no effect when disabled, so equal kites compare equal)."""
+        """The same kite with no turbulence and no measurement noise (the wind settings are reset to their
+        defaults, which have no effect when turbulence is disabled, so equal kites compare equal)."""
         return replace(self, turbulence=TurbulenceSettings(enabled=False, anemometer_noise=0.0),
-                       noise=NoiseSettings(0.0, 0.0, 0.0))
+                       noise=NoiseSettings(0.0, 0.0, 0.0), wind_model=DEFAULT_WIND_MODEL,
+                       wind_field=WindFieldSettings())
+
+    def make_wind(self, seed: int, rng: np.random.Generator) -> WindModel:
+        """The :class:`~kite_rto.kite.wind.WindModel` this configuration describes, for plant seed ``seed`` (the
+        field's box seed) and the wind's own random stream ``rng``."""
+        if self.wind_model == "field" and self.turbulence.enabled:
+            box = MannBox(self.wind_field, self.wind_field.sigma(self.params), seed)
+            return FieldWind(box, self.params, self.turbulence.anemometer_noise, rng)
+        return UniformGust(self.turbulence, self.params.w_ref, rng)
 
 
 @dataclass(frozen=True)
@@ -143,61 +165,6 @@ def _measurement(t, theta, phi, psi, theta_dot, phi_dot, psi_dot, tension, posit
     return m
 
 
-class _BlockTurbulence(Turbulence):
-    """:class:`~kite_rto.kite.wind.Turbulence` with the per-sample cost of its random draws removed.
-
-    Same random stream, same draws in the same order, same floating-point operations, hence bit-for-bit the same
-    gusts and anemometer readings; the normals are only drawn from the generator in blocks (a NumPy ``Generator``
-    yields the same sequence whether drawn one by one or as an array) instead of one NumPy call per draw.
-    ``benchmarks/bench_plant.py`` checks the equivalence against the base class.
-    """
-
-    _BLOCK = 256
-
-    def __init__(self, settings: TurbulenceSettings, w_ref: float, rng: np.random.Generator):
-        super().__init__(settings, w_ref, rng)
-        rho = settings.anemometer_correlation
-        self._rho = rho
-        self._rho_c = math.sqrt(1.0 - rho**2)
-        self._noise_std = settings.anemometer_noise
-        self._period = settings.update_period
-        self._z: list = []
-        self._zi = 0
-
-    def _normal(self) -> float:
-        zi = self._zi
-        if zi >= len(self._z):
-            self._z = self._rng.standard_normal(self._BLOCK).tolist()
-            zi = 0
-        self._zi = zi + 1
-        return self._z[zi]
-
-    def advance(self, t: float) -> None:
-        if not self.settings.enabled:
-            return
-        a, b = self._a, self._b
-        while t >= self._next_update - 1e-12:
-            n1 = self._normal()
-            n2 = self._normal()
-            self.gust = a * self.gust + b * n1
-            self._own = a * self._own + b * n2
-            self._next_update += self._period
-
-    def anemometer(self) -> float:
-        gust = self._rho * self.gust + self._rho_c * self._own
-        if self._noise_std > 0:
-            zi = self._zi                       # inlined _normal()
-            if zi >= len(self._z):
-                self._z = self._rng.standard_normal(self._BLOCK).tolist()
-                zi = 0
-            self._zi = zi + 1
-            noise = 0.0 + self._noise_std * self._z[zi]      # what Generator.normal(0.0, std) computes
-        else:
-            noise = 0.0
-        w = self.w_ref0 + gust + noise
-        return 0.0 if 0.0 > w else w            # max(w, 0.0), NaN included
-
-
 class KitePlant:
     """Fixed-step simulation of the real kite.
 
@@ -212,20 +179,18 @@ class KitePlant:
         self.model = shared_model()
         self.dt = self.config.dt
         gust_ss, noise_ss = np.random.SeedSequence(self.seed).spawn(2)
-        self.turbulence = _BlockTurbulence(self.config.turbulence, self.config.params.w_ref,
-                                           np.random.default_rng(gust_ss))
+        self.wind = self.config.make_wind(self.seed, np.random.default_rng(gust_ss))
         self._noise_rng = np.random.default_rng(noise_ss)
         self._p = self.config.params.as_vector()
         self._i_wref = KiteParams.names().index("w_ref")
         self._h = self.dt / self.config.substeps
-        self._delay = deque([0.0] * round(self.config.dead_time / self.dt))
-        self._max_change = self.config.rate_limit * self.dt
+        self.actuator = Actuator(self.config.dead_time, self.config.rate_limit, self.dt)
+        self._push = self.actuator.push
         self._substeps = range(self.config.substeps)
         nz = self.config.noise
         self._noise_std = (nz.angle, nz.rate, nz.tension)
         self._step_py = self.model.step_py
         self.state = list(self.config.launch_state)
-        self.applied_delta = 0.0
         self.t = 0.0
         self.k = 0
         # Time of sample k is k * dt_ns * 1e-9 s: the same float a ROS node computes from the sample's stamp (integer
@@ -242,9 +207,16 @@ class KitePlant:
         """The latest measurement (the one returned by the last :meth:`step`)."""
         return self._last
 
+    @property
+    def kite_wind(self) -> float:
+        """The reference wind the kite flew in during the last step, m/s at ``z_ref`` (the truth: the wind at the
+        kite is ``kite_wind (z / z_ref)^shear``; not a measurement, for benchmarks and tests)."""
+        return self._p[self._i_wref]
+
     def step(self, delta: float) -> Measurement:
         """Send steering command ``delta`` (clipped to [-1, 1]; NaN counts as 0) and advance one sample."""
-        # Hot path (tens of thousands of calls per simulated hour): locals, no per-call NumPy, no helper calls.
+        # Hot path (tens of thousands of calls per simulated hour): locals, no per-call NumPy, three calls (actuator,
+        # wind advance, wind at the kite).
         d = float(delta)
         if d != d:
             d = 0.0
@@ -252,31 +224,20 @@ class KitePlant:
             d = -1.0
         elif d > 1.0:
             d = 1.0
-        delay = self._delay
-        if delay:
-            delay.append(d)
-            d = delay.popleft()
-        mc = self._max_change
-        change = d - self.applied_delta
-        if change < -mc:
-            change = -mc
-        elif change > mc:
-            change = mc
-        self.applied_delta += change
+        ad = self._push(d)
         self.k += 1
         t = self.t = self.k * self._dt_ns * 1e-9
-        turb = self.turbulence
-        if t >= turb._next_update - 1e-12:
-            turb.advance(t)
-        w = turb.w_ref0 + turb.gust
+        wind = self.wind
+        wind.advance(t)
         p = self._p
-        p[self._i_wref] = 0.1 if 0.1 > w else w         # Turbulence.reference_wind(): max(w, 0.1)
+        p[self._i_wref] = wind.kite_reference_wind(self._last.position)     # at the step's start position
         x = self.state
-        ad, h, step_py = self.applied_delta, self._h, self._step_py
+        h, step_py = self._h, self._step_py
         for _ in self._substeps:
             x, out = step_py(x, ad, p, h)
         self.state, self._out = x, out
-        if not (out[1] > 0.0 and all(map(_isfinite, x)) and all(map(_isfinite, out))):
+        # one finiteness test for all values: a sum is NaN or infinite iff a term is (or beyond 1e308, not a kite)
+        if not (out[_ALTITUDE] > 0.0 and _isfinite(sum(x) + sum(out))):
             self._relaunch()
         m = self._last = self._measure()
         return m
@@ -292,30 +253,23 @@ class KitePlant:
         if count:
             self.crashes += 1
         self.state = list(self.config.launch_state)
-        self.applied_delta = 0.0
-        self._delay = deque([0.0] * len(self._delay))
+        self.actuator.reset()
         self._out = self._evaluate()
 
     def _evaluate(self) -> list:
-        return self.model.step_py(self.state, self.applied_delta, self._p, 0.0)[1]
-
-    def _draw(self) -> list:
-        if self._ni >= len(self._noise):
-            self._noise = self._noise_rng.standard_normal((1024, 7)).tolist()
-            self._ni = 0
-        self._ni += 1
-        return self._noise[self._ni - 1]
+        return self.model.step_py(self.state, self.actuator.applied, self._p, 0.0)[1]
 
     def _measure(self) -> Measurement:
-        ni = self._ni                                   # inlined _draw()
+        ni = self._ni
         if ni >= len(self._noise):
             self._noise = self._noise_rng.standard_normal((1024, 7)).tolist()
             ni = 0
         self._ni = ni + 1
         e0, e1, e2, e3, e4, e5, e6 = self._noise[ni]
-        x, out = self.state, self._out
+        x = self.state
+        tension, px, py, pz, theta_dot, phi_dot, psi_dot = _measured(self._out)
         sa, sr, st = self._noise_std
         return _measurement(self.t, x[0] + sa * e0, x[1] + sa * e1, x[2] + sa * e2,
-                            out[6] + sr * e3, out[7] + sr * e4, out[8] + sr * e5,
-                            out[0] * (1.0 + st * e6), (out[3], out[4], out[5]),
-                            self.turbulence.anemometer(), self.applied_delta, self.crashes, self.k)
+                            theta_dot + sr * e3, phi_dot + sr * e4, psi_dot + sr * e5,
+                            tension * (1.0 + st * e6), (px, py, pz),
+                            self.wind.anemometer(), self.actuator.applied, self.crashes, self.k)

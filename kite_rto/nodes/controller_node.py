@@ -25,7 +25,7 @@ from ..flight.controller import ControllerSettings, PathController
 from ..flight.laps import LapDetector
 from ..kite.params import KiteParams, ParameterError
 from ..flight.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, Setpoints, SetpointError
-from ..kite.plant import shared_model
+from ..kite.model import shared_model
 from .common import (LATCHED, MEASUREMENTS, RELIABLE_10, ParamSpec, declare_params, run_node,
                      stamp_to_ns)
 from ..flight.sample_join import MAX_STAMP_GAP_NS, POSITION_MAX, TENSION_MAX, WIND_MAX, RejectLog, state_values

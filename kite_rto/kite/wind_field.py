@@ -1,0 +1,272 @@
+"""A 3-D turbulent wind field: a Mann-model box (DTU's ``hipersim``), frozen and advected with the mean wind.
+
+The wind at a point ``(x, y, z)`` (m, anchor frame: x downwind, z up) at time ``t`` is
+
+    w(x, y, z, t) = U(z) + u'(x - U_hub t, y, z)
+
+with ``U(z) = w_ref (z / z_ref)^a`` the plant's power-law profile (SPEC §2), ``u'`` the longitudinal component of
+the box (Taylor's frozen turbulence, advected at the mean wind at hub height ``U_hub = U(z_hub)``; the box tiles
+periodically along x, as the Mann box is periodic there), interpolated trilinearly. The kite's model knows only a
+wind along x, so only ``u'`` enters (the lateral and vertical components, ~0.7 and ~0.5 of sigma_u, are generated
+with it but not used). The ground-station anemometer at ``(0, 0, z_ref)`` reads the same field there.
+
+Turbulence (IEC 61400-1 ed. 3, normal turbulence model, section 6.3 and annex C):
+
+* turbulence category ``B`` by default: ``I_ref = 0.14`` (A 0.16, C 0.12), ``sigma_1 = I_ref (0.75 U_hub + 5.6)``;
+  with the default plant (w_ref 8 m/s at 10 m, shear 0.20) and ``z_hub = 200 m``: ``U_hub = 14.56 m/s``,
+  ``sigma_1 = 2.31 m/s``, turbulence intensity 15.9 % at hub height;
+* Mann parameters of annex C: ``L = 0.8 Lambda_1 = 33.6 m`` (``Lambda_1 = 42 m`` above 60 m), ``Gamma = 3.9``;
+  ``alpha-eps^(2/3)`` is whatever gives ``sigma_1``: the box is generated with 1 and scaled so that the
+  standard deviation of its u component is ``sigma_1`` (the box's equivalent ``alpha-eps^(2/3)`` is
+  ``scale^2``, reported by :attr:`MannBox.alpha_epsilon`);
+* the same sigma_u and length scale hold at every height of the box (Mann's model is homogeneous, and IEC's
+  normal turbulence model takes sigma_1 invariant with height): the anemometer at 10 m sees sigma_1 at a mean
+  wind of 8 m/s, a turbulence intensity of ~29 % (``bench_wind.py``).
+
+Coherence (``bench_wind.py``): the boxes reproduce the Mann model's own coherence; for vertical separations it
+agrees with IEC's exponential coherence model within 0.1, across the wind (y) it is lower than the exponential
+model at low frequency and goes negative above ~0.02 Hz (a known difference of the two IEC models).
+
+Default box: 2048 x 32 x 32 points, 8 x 16 x 10 m: 16.4 km along the wind (18.7 min at U_hub before it repeats),
+y in [-256, 256) m, z in [0, 320) m; the kite flies ~300-370 m downwind, up to ±250 m sideways, 100-310 m up.
+Generating one takes ~5 s and ~450 MB once (one CPU, so the box does not depend on the machine); boxes are cached
+per seed and settings as ``.npy`` files in :func:`cache_dir` and memory-mapped when used (start-up < 0.1 s).
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from .model import MIN_WIND_HEIGHT
+from .params import KiteParams, ParameterError, check_range
+from .wind import MIN_REFERENCE_WIND, NormalBlocks, WindModel
+
+__all__ = ["WindFieldSettings", "MannBox", "FieldWind", "cache_dir", "IEC_REFERENCE_INTENSITY",
+           "iec_coherence", "IEC_COHERENCE_SCALE"]
+
+IEC_REFERENCE_INTENSITY = {"A": 0.16, "B": 0.14, "C": 0.12}
+"""IEC 61400-1 ed. 3 turbulence categories: expected turbulence intensity I_ref at 15 m/s."""
+IEC_COHERENCE_SCALE = 8.1 * 42.0
+"""IEC 61400-1 ed. 3 coherence scale parameter L_c = 8.1 Lambda_1, Lambda_1 = 42 m above 60 m; m."""
+_CACHE_ENV = "KITE_RTO_CACHE"
+_FORMAT = "v1"          # part of the cache key: change it when the generation or scaling changes
+
+
+def _cell(f: float, n: int) -> tuple:
+    """Lower grid index and fraction of the fractional index ``f`` on an axis of ``n`` points, clamped to it."""
+    if f <= 0.0:
+        return 0, 0.0
+    if f >= n - 1:
+        return n - 2, 1.0
+    i = int(f)
+    return i, f - i
+
+
+def iec_coherence(f, separation: float, mean_wind: float, scale: float = IEC_COHERENCE_SCALE):
+    """IEC 61400-1 exponential coherence of the longitudinal component, ``exp(-12 sqrt((f r/V)^2 + (0.12 r/L_c)^2))``.
+
+    ``f`` Hz (scalar or array), ``separation`` r m (perpendicular to the mean wind), ``mean_wind`` V m/s.
+    """
+    f = np.asarray(f, dtype=float)
+    return np.exp(-12.0 * np.sqrt((f * separation / mean_wind) ** 2 + (0.12 * separation / scale) ** 2))
+
+
+def cache_dir() -> str:
+    """Directory of cached wind boxes: ``$KITE_RTO_CACHE`` if set, else the platform's user cache directory for
+    ``kite_rto`` (``platformdirs.user_cache_dir``, e.g. ``~/.cache/kite_rto`` on Linux), subfolder ``wind``."""
+    root = os.environ.get(_CACHE_ENV)
+    if not root:
+        import platformdirs
+        root = platformdirs.user_cache_dir("kite_rto")
+    return os.path.join(root, "wind")
+
+
+@dataclass(frozen=True)
+class WindFieldSettings:
+    """Settings of the 3-D turbulent field (see the module docstring for the numbers they give).
+
+    Attributes:
+        turbulence_class: IEC 61400-1 turbulence category, ``"A"``, ``"B"`` or ``"C"``.
+        hub_height: height whose mean wind sets sigma_1 and the advection speed, m (> 0).
+        length_scale: Mann length scale L, m (> 0).
+        gamma: Mann anisotropy parameter Gamma (>= 0).
+        points: box points (Nx, Ny, Nz) along x (downwind), y, z; each >= 4.
+        spacing: box spacing (dx, dy, dz), m (> 0).
+    """
+
+    turbulence_class: str = "B"
+    hub_height: float = 200.0
+    length_scale: float = 33.6
+    gamma: float = 3.9
+    points: tuple = (2048, 32, 32)
+    spacing: tuple = (8.0, 16.0, 10.0)
+
+    def __post_init__(self):
+        n = type(self).__name__
+        if self.turbulence_class not in IEC_REFERENCE_INTENSITY:
+            raise ParameterError(f"{n}.turbulence_class = {self.turbulence_class!r}: expected one of "
+                                 f"{', '.join(IEC_REFERENCE_INTENSITY)}")
+        check_range(n, "hub_height", self.hub_height, 0.0, low_open=True)
+        check_range(n, "length_scale", self.length_scale, 0.0, low_open=True)
+        check_range(n, "gamma", self.gamma, 0.0)
+        if len(self.points) != 3 or any(isinstance(v, bool) or not isinstance(v, int) or v < 4 for v in self.points):
+            raise ParameterError(f"{n}.points = {self.points!r}: expected three integers >= 4")
+        if len(self.spacing) != 3:
+            raise ParameterError(f"{n}.spacing = {self.spacing!r}: expected (dx, dy, dz)")
+        for i, v in enumerate(self.spacing):
+            check_range(n, f"spacing[{i}]", v, 0.0, low_open=True)
+
+    def hub_wind(self, params: KiteParams) -> float:
+        """Mean wind at hub height of the power-law profile of ``params``, m/s."""
+        return params.w_ref * (self.hub_height / params.z_ref) ** params.shear
+
+    def sigma(self, params: KiteParams) -> float:
+        """IEC normal-turbulence-model standard deviation of u, ``I_ref (0.75 U_hub + 5.6)``, m/s."""
+        return IEC_REFERENCE_INTENSITY[self.turbulence_class] * (0.75 * self.hub_wind(params) + 5.6)
+
+
+class MannBox:
+    """The longitudinal turbulence ``u'`` (m/s) of one Mann box, generated once per seed and settings and cached.
+
+    The cache holds the box as generated with ``alpha-eps^(2/3) = 1`` (float32); loading it memory-maps the file
+    and scales it to zero mean and standard deviation ``sigma``.
+
+    Args:
+        settings: :class:`WindFieldSettings`.
+        sigma: standard deviation of u the box is scaled to, m/s (> 0).
+        seed: seed of the box (non-negative integer).
+        directory: cache directory (:func:`cache_dir` if None).
+
+    Attributes:
+        raw: float32 array (Nx, Ny, Nz) as generated, read-only (memory-mapped from the cache file).
+        offset, scale: ``u' = scale * raw - offset`` (m/s).
+        alpha_epsilon: the box's equivalent Mann ``alpha-eps^(2/3)``, ``scale^2``, m^(4/3)/s^2.
+        path: the cache file.
+        generated: True if this object generated the box (False: read from the cache).
+    """
+
+    def __init__(self, settings: WindFieldSettings, sigma: float, seed: int, directory: str | None = None):
+        check_range(type(self).__name__, "sigma", sigma, 0.0, low_open=True)
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ParameterError(f"MannBox.seed = {seed!r}: expected an integer >= 0")
+        self.settings, self.sigma, self.seed = settings, float(sigma), int(seed)
+        directory = directory or cache_dir()
+        s = settings
+        key = repr((_FORMAT, s.length_scale, s.gamma, tuple(s.points), tuple(map(float, s.spacing)), self.seed))
+        self.path = os.path.join(directory, f"mann_{hashlib.sha1(key.encode()).hexdigest()[:16]}.npy")
+        self.generated = not os.path.exists(self.path)
+        if self.generated:
+            os.makedirs(directory, exist_ok=True)
+            raw = self._generate()
+            tmp = f"{self.path}.{os.getpid()}.tmp"
+            with open(tmp, "wb") as fh:
+                np.save(fh, raw)
+            os.replace(tmp, self.path)                 # atomic: a concurrent reader never sees half a file
+        self.raw = np.load(self.path, mmap_mode="r")
+        mean, std = float(self.raw.mean(dtype=np.float64)), float(self.raw.std(dtype=np.float64))
+        self.scale = self.sigma / std
+        self.offset = self.scale * mean
+        self.alpha_epsilon = self.scale**2
+
+    def _generate(self) -> np.ndarray:
+        from hipersim import MannTurbulenceField       # slow import (xarray): only when a box is generated
+        s = self.settings
+        field = MannTurbulenceField.generate(alphaepsilon=1.0, L=s.length_scale, Gamma=s.gamma, Nxyz=s.points,
+                                             dxyz=s.spacing, seed=self.seed, n_cpu=1)
+        return np.ascontiguousarray(field.uvw[0], dtype=np.float32)
+
+    def u(self) -> np.ndarray:
+        """The scaled box ``u'``, m/s, float64 array (Nx, Ny, Nz) (a copy)."""
+        return self.scale * np.asarray(self.raw, dtype=np.float64) - self.offset
+
+
+class FieldWind(WindModel):
+    """The plant's wind from a :class:`MannBox`: mean power-law profile plus the advected box (module docstring).
+
+    Args:
+        box: the :class:`MannBox`.
+        params: the plant's :class:`KiteParams` (w_ref, z_ref and shear of the mean profile).
+        anemometer_noise: white noise standard deviation of the anemometer, m/s (>= 0).
+        rng: generator of the anemometer noise.
+
+    Sampling is pure Python on a flat memory view of the box (8 reads and 7 interpolations per point); outside
+    the box in y or z the nearest face is used.
+    """
+
+    def __init__(self, box: MannBox, params: KiteParams, anemometer_noise: float, rng: np.random.Generator):
+        s = box.settings
+        self.box = box
+        self.w_ref0 = float(params.w_ref)
+        self._z_ref, self._shear = float(params.z_ref), float(params.shear)
+        self.mean_speed = s.hub_wind(params)            # advection speed, m/s
+        nx, ny, nz = s.points
+        dx, dy, dz = map(float, s.spacing)
+        self._n = (nx, ny, nz)
+        self._inv = (1.0 / dx, 1.0 / dy, 1.0 / dz)
+        self._y0 = -0.5 * ny * dy                      # box y from -Ny dy / 2, z from 0
+        self._flat = memoryview(np.ascontiguousarray(box.raw).reshape(-1))
+        self._scale, self._offset = box.scale, box.offset
+        self._shift = 0.0                              # U_hub t, m
+        self._noise_std = float(anemometer_noise)
+        self._normals = NormalBlocks(rng)
+        # the anemometer's line of the box at (y, z) = (0, z_ref), one value per x point: one linear interpolation
+        # per sample instead of a trilinear one
+        dx = float(s.spacing[0])
+        self._anemometer_line = []
+        for i in range(nx):
+            self._shift = -i * dx
+            self._anemometer_line.append(self.turbulence_at(0.0, 0.0, self._z_ref))
+        self._shift = 0.0
+
+    def advance(self, t: float) -> None:
+        """Advect the frozen box to time ``t`` (s)."""
+        self._shift = self.mean_speed * t
+
+    def turbulence_at(self, x: float, y: float, z: float) -> float:
+        """u' (m/s) at the point (x, y, z) m at the current time (trilinear)."""
+        nx, ny, nz = self._n
+        ix_, iy_, iz_ = self._inv
+        fx = (x - self._shift) * ix_
+        fl = math.floor(fx)
+        ax = fx - fl
+        i0 = int(fl) % nx
+        i1 = i0 + 1 if i0 + 1 < nx else 0
+        j, ay = _cell((y - self._y0) * iy_, ny)
+        k, az = _cell(z * iz_, nz)
+        u, nyz = self._flat, ny * nz
+        a = i0 * nyz + j * nz + k
+        b = i1 * nyz + j * nz + k
+        bz = 1.0 - az
+        c00 = u[a] * bz + u[a + 1] * az
+        c01 = u[a + nz] * bz + u[a + nz + 1] * az
+        c10 = u[b] * bz + u[b + 1] * az
+        c11 = u[b + nz] * bz + u[b + nz + 1] * az
+        by = 1.0 - ay
+        raw = (c00 * by + c01 * ay) * (1.0 - ax) + (c10 * by + c11 * ay) * ax
+        return self._scale * raw - self._offset
+
+    def kite_reference_wind(self, position: tuple) -> float:
+        """``w_ref0 + u' (z_ref / z)^a``: the reference wind whose profile passes through ``U(z) + u'`` at the
+        kite, m/s (never below :data:`MIN_REFERENCE_WIND`)."""
+        x, y, z = position
+        hz = z if z > MIN_WIND_HEIGHT else MIN_WIND_HEIGHT
+        w = self.w_ref0 + self.turbulence_at(x, y, z) * (self._z_ref / hz) ** self._shear
+        return MIN_REFERENCE_WIND if MIN_REFERENCE_WIND > w else w
+
+    def anemometer(self) -> float:
+        """Anemometer reading at (0, 0, z_ref), m/s: mean wind plus u' there plus measurement noise."""
+        fx = -self._shift * self._inv[0]
+        fl = math.floor(fx)
+        ax = fx - fl
+        line = self._anemometer_line
+        n = len(line)
+        i0 = int(fl) % n
+        i1 = i0 + 1 if i0 + 1 < n else 0
+        w = self.w_ref0 + line[i0] + (line[i1] - line[i0]) * ax
+        if self._noise_std > 0:
+            w += self._noise_std * self._normals.next()
+        return 0.0 if 0.0 > w else w
