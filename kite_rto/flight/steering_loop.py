@@ -5,21 +5,17 @@ as plain values and answers each /kite/state sample through the ``answer(stamp_n
 comes from ``clock`` and the graph from ``setpoint_sources`` / ``sync_sources`` (publisher counts), so tests drive
 it deterministically; :class:`kite_rto.nodes.controller_node.ControllerNode` only converts messages.
 
-Join: a /kite/state sample is answered once the anemometer reading with the same stamp is in (DDS does not order
-across topics; waiting makes the loop as deterministic as the pure runner); if that reading is lost, the next
-sample releases the waiting one with the previous reading. Timeline: the :class:`~.sample_join.Timeline` rule
-shared with the optimizer's :class:`~.sample_join.SampleJoin`; a complete sample off the timeline is only a
-candidate until the next complete sample continues it. A restart candidate (stamped before the last sample) is
-answered by a fresh controller, kept if the restart is confirmed; the flying controller never sees it. Readings
-with bad values, or (tension, position, sync) stamped far from the last sample, are rejected with throttled
-warnings.
+Join: a /kite/state sample is answered once the anemometer reading of its stamp is in (DDS does not order across
+topics); if that reading is lost, the next sample releases the waiting one with the previous reading. Timeline:
+the :class:`~.sample_join.Timeline` rule shared with :class:`~.sample_join.SampleJoin`. A restart candidate is
+answered by a fresh controller, kept if the restart is confirmed; the flying controller never sees it. Bad
+readings, or readings stamped far from the last sample, are rejected with throttled warnings.
 
-Synchronization (``sync=True``): the optimizer publishes, after each sample it has processed, the setpoints in
-force and the count of its setpoint messages. A sample is answered once its sync message is in; a changed count
-applies the setpoints first (the pure runner's order: the optimizer sees sample k, then the controller answers
-it). A held sample is released unsynchronized after ``sync_timeout``, or after :data:`SYNC_ABSENT` s when no
-optimizer is in the graph; from then on samples are answered at once and setpoints apply directly, until a sync
-message arrives again. The graph is never asked before a sample has waited.
+Synchronization (``sync=True``): the optimizer's sync message for sample k carries the setpoints in force and
+the count of its setpoint messages; sample k is answered once it is in, a changed count applying the setpoints
+first (the pure runner's order). A held sample is released unsynchronized after ``sync_timeout``, or after
+:data:`SYNC_ABSENT` s without an optimizer in the graph (asked only then); from then on samples are answered at
+once and setpoints apply directly, until a sync message arrives again.
 """
 from __future__ import annotations
 

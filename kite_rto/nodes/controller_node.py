@@ -5,7 +5,8 @@ gets the current setpoints); answers every ``/kite/state`` sample on ``/kite/ste
 (the lockstep handshake); publishes the reference path (nav_msgs/Path, for RViz/Foxglove) and per-lap statistics.
 With ``sync_optimizer:=true`` (lockstep) it answers a sample only after the optimizer's ``/rto/sync`` message for it
 and takes the setpoints from there, so a setpoint change takes effect at the same sample as in the pure runner.
-All computation is :class:`kite_rto.flight.controller.PathController` and :class:`kite_rto.flight.laps.LapDetector`.
+All logic is :class:`kite_rto.flight.steering_loop.SteeringLoop` (join, timeline, restart, optimizer sync) around
+:class:`kite_rto.flight.controller.PathController` and :class:`kite_rto.flight.laps.LapDetector`.
 """
 from __future__ import annotations
 
