@@ -21,7 +21,8 @@ from kite_rto.flight.controller import ControllerSettings, PathController
 from kite_rto.kite.params import KiteParams, ParameterError
 from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints
 from kite_rto.kite.plant import shared_model
-from kite_rto.nodes.common import READ_ONLY, RELIABLE_10, ParamSpec, ns_to_stamp
+from kite_rto.nodes.interface import RELIABLE_10, ns_to_stamp
+from kite_rto.nodes.parameters import READ_ONLY, ParamSpec
 from kite_rto.tools.graph import node_command
 
 from rosutil import Probe, start_node, stop

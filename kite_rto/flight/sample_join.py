@@ -20,7 +20,7 @@ import time
 from types import SimpleNamespace
 from typing import NamedTuple
 
-__all__ = ["SampleJoin", "Timeline", "Place", "Placement", "RejectLog", "state_values", "MAX_STAMP_GAP_NS", "ANGLE_MAX", "PSI_MAX", "RATE_MAX",
+__all__ = ["SampleJoin", "Timeline", "Place", "Placement", "RejectLog", "state_values", "reading_error", "MAX_STAMP_GAP_NS", "ANGLE_MAX", "PSI_MAX", "RATE_MAX",
            "TENSION_MAX", "POSITION_MAX", "WIND_MAX"]
 
 PARTS = ("state", "tension", "position", "wind")
@@ -53,6 +53,23 @@ def state_values(names, position, velocity) -> tuple[list, list]:
     if max(map(abs, vel)) > RATE_MAX:
         raise ValueError(f"velocity {vel!r}: expected rates within +-{RATE_MAX:g} rad/s")
     return pos, vel
+
+
+def reading_error(part: str, value) -> str | None:
+    """Why a ``tension`` (N), ``position`` ((x, y, z) m) or ``wind`` (m/s) reading is rejected, or None if plausible."""
+    if part == "tension":
+        if not (math.isfinite(value) and 0.0 <= value <= TENSION_MAX):
+            return f"rejected tension message {value!r}: expected a finite force in [0, {TENSION_MAX:g}] N"
+    elif part == "position":
+        if not all(math.isfinite(x) and abs(x) <= POSITION_MAX for x in value):
+            return f"rejected position message {list(value)!r}: expected finite coordinates within " \
+                   f"+-{POSITION_MAX:g} m"
+    elif part == "wind":
+        if not (math.isfinite(value) and 0.0 <= value < WIND_MAX):
+            return f"rejected wind message {value!r}: expected a finite speed in [0, {WIND_MAX:g}) m/s"
+    else:
+        raise ValueError(f"reading_error: unknown part {part!r}")
+    return None
 
 
 class RejectLog:

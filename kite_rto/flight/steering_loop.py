@@ -1,9 +1,8 @@
 """The controller node's per-sample logic without ROS: join, timeline, plant restart, optimizer synchronization.
 
-:class:`SteeringLoop` takes the plant's readings (stamps in integer ns), the setpoint and ``/rto/sync`` messages
-as plain values and answers each /kite/state sample through the ``answer(stamp_ns, delta)`` callback. Wall time
-comes from ``clock`` and the graph from ``setpoint_sources`` / ``sync_sources`` (publisher counts), so tests drive
-it deterministically; :class:`kite_rto.nodes.controller_node.ControllerNode` only converts messages.
+:class:`SteeringLoop` takes the plant's readings (stamps in integer ns), setpoint and ``/rto/sync`` messages as
+plain values and answers each /kite/state sample through ``answer(stamp_ns, delta)``. Wall time comes from
+``clock``, the graph from publisher counts, so tests drive it deterministically.
 
 Join: a /kite/state sample is answered once the anemometer reading of its stamp is in (DDS does not order across
 topics); if that reading is lost, the next sample releases the waiting one with the previous reading. Timeline:
@@ -27,7 +26,7 @@ from ..kite.plant import shared_model
 from .controller import PathController
 from .laps import LapDetector
 from .path import Setpoints, SetpointError
-from .sample_join import POSITION_MAX, TENSION_MAX, WIND_MAX, Place, RejectLog, Timeline, state_values
+from .sample_join import Place, RejectLog, Timeline, reading_error, state_values
 
 __all__ = ["SteeringLoop", "SYNC_ABSENT", "SETPOINTS_GRACE", "SETPOINTS_WAIT", "SYNC_NAMES"]
 
@@ -40,6 +39,19 @@ SYNC_NAMES = ["theta_0", "A_phi", "A_theta", "updates"]
 """Names of a /rto/sync message: the setpoints in force (rad) and the optimizer's setpoint-message count."""
 _KEEP = 64
 """Anemometer readings and sync entries kept ahead of their samples."""
+
+
+def _keep(entries: dict, stamp: int, value) -> None:
+    """Store ``value`` at ``stamp``, forgetting the oldest entry when :data:`_KEEP` are held."""
+    if len(entries) >= _KEEP:
+        del entries[next(iter(entries))]
+    entries[stamp] = value
+
+
+def _measurement(stamp: int, pos, vel, wind: float) -> SimpleNamespace:
+    """What :meth:`PathController.command` reads: time s, angles rad, rates rad/s, reference wind m/s."""
+    return SimpleNamespace(t=stamp * 1e-9, theta=pos[0], phi=pos[1], psi=pos[2], theta_dot=vel[0], phi_dot=vel[1],
+                           psi_dot=vel[2], wind_ref=wind)
 
 
 def fmt_setpoints(c: Setpoints) -> str:
@@ -75,8 +87,7 @@ class SteeringLoop:
         self._setpoints_in = False        # accepted setpoints yet (see _await_setpoints)
         self._t_up = clock()
         self._setpoints_msg = None        # last valid setpoints (rad); applied at once unless synchronized
-        self.sync = sync
-        self.sync_timeout = sync_timeout
+        self.sync, self.sync_timeout = sync, sync_timeout
         self._syncs = {}                  # sync entries by stamp (ns): (setpoints rad, updates)
         self._sync_held = None            # (stamp, measurement, position, wall time): waits for its sync
         self._sync_lost = False           # timed out: answer at once until a sync message arrives again
@@ -84,32 +95,30 @@ class SteeringLoop:
 
     # -------------------------------------------------------------- measurements
     def wind_reading(self, stamp: int, v: float) -> None:
-        if not (math.isfinite(v) and 0.0 <= v < WIND_MAX):
-            self.reject("wind", f"rejected wind message {v!r}: expected a finite speed in [0, {WIND_MAX:g}) m/s")
+        """An anemometer reading (m/s): releases the state sample of its stamp if that one waits for it."""
+        if self._bad("wind", v):
             return
-        winds = self._winds
-        if len(winds) >= _KEEP:
-            del winds[next(iter(winds))]
-        winds[stamp] = v
+        _keep(self._winds, stamp, v)
         for held in (self._pending, self._jump):
             if held is not None and held[0] == stamp:
                 self._process(held)
                 return
 
     def tension_reading(self, stamp: int, v: float) -> None:
-        if not (math.isfinite(v) and 0.0 <= v <= TENSION_MAX):
-            self.reject("tension", f"rejected tension message {v!r}: expected a finite force in "
-                                   f"[0, {TENSION_MAX:g}] N")
-        elif self._stamp_near("tension", stamp):
+        """A line tension (N), for the lap statistics."""
+        if not self._bad("tension", v) and self._stamp_near("tension", stamp):
             self._tension = v
 
     def position_reading(self, stamp: int, p) -> None:
         """``p``: (x, y, z) in m; the altitude z feeds the lap statistics."""
-        if not all(math.isfinite(x) and abs(x) <= POSITION_MAX for x in p):
-            self.reject("position", f"rejected position message {list(p)!r}: expected finite coordinates "
-                                    f"within +-{POSITION_MAX:g} m")
-        elif self._stamp_near("position", stamp):
+        if not self._bad("position", p) and self._stamp_near("position", stamp):
             self._altitude = p[2]
+
+    def _bad(self, part: str, value) -> bool:
+        why = reading_error(part, value)
+        if why is not None:
+            self.reject(part, why)
+        return why is not None
 
     def _stamp_near(self, what: str, stamp: int) -> bool:
         if self.timeline.near(stamp):
@@ -191,8 +200,7 @@ class SteeringLoop:
             self._wind = wind
         if self._winds:
             self._drop_winds(stamp)
-        m = SimpleNamespace(t=stamp * 1e-9, theta=pos[0], phi=pos[1], psi=pos[2], theta_dot=vel[0], phi_dot=vel[1],
-                            psi_dot=vel[2], wind_ref=self._wind)
+        m = _measurement(stamp, pos, vel, self._wind)
         if self.sync and self._wait_for_sync(stamp):
             self._sync_held = (stamp, m, pos, self._clock())
             return
@@ -237,9 +245,7 @@ class SteeringLoop:
         self._restart = None
         if stamp < last:
             fresh = PathController(shared_model(), self.params, self.controller.setpoints, self.settings)
-            m = SimpleNamespace(t=stamp * 1e-9, theta=pos[0], phi=pos[1], psi=pos[2], theta_dot=vel[0],
-                                phi_dot=vel[1], psi_dot=vel[2], wind_ref=self._wind if wind is None else wind)
-            delta = fresh.command(m)
+            delta = fresh.command(_measurement(stamp, pos, vel, self._wind if wind is None else wind))
             self._restart = (fresh, delta)
             self._answer(stamp, delta)
         return False
@@ -332,9 +338,7 @@ class SteeringLoop:
             self._apply_sync(vals[:3], vals[3])
             self._steer(*held[:3])
         elif self.timeline.last is None or stamp > self.timeline.last:
-            if len(self._syncs) >= _KEEP:
-                del self._syncs[next(iter(self._syncs))]
-            self._syncs[stamp] = (vals[:3], vals[3])
+            _keep(self._syncs, stamp, (vals[:3], vals[3]))
 
     def watchdog(self) -> None:
         """Call periodically (the node: every 0.05 s): releases a sample that waited too long for its sync."""

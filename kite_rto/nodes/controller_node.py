@@ -24,7 +24,9 @@ from ..flight.controller import ControllerSettings, PathController
 from ..flight.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, Setpoints, SetpointError
 from ..flight.steering_loop import SteeringLoop, fmt_setpoints
 from ..kite.params import KiteParams, ParameterError
-from .common import LATCHED, MEASUREMENTS, RELIABLE_10, ParamSpec, declare_params, ns_to_stamp, run_node, stamp_to_ns
+from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
+from .parameters import ParamSpec, declare_params
+from .spin import run_node
 from .topics import LAPS, POSITION, REFERENCE_PATH, SETPOINTS, STATE, STEERING, SYNC, TENSION, WIND
 
 __all__ = ["ControllerNode", "PARAMS", "LAP_FIELDS", "main"]

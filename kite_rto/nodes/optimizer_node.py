@@ -28,8 +28,9 @@ from ..rto.session import KiteRTOSettings, RTOSession, make_kite_gma
 from ..kite.params import KiteParams, ParameterError
 from ..flight.path import Setpoints, SetpointError, ShapeBox, setpoints_from_shape, validate_setpoints
 from ..gma import HistoryStore
-from .common import (LATCHED, MEASUREMENTS, RELIABLE_10, ParamSpec, declare_params, ns_to_stamp, request_exit,
-                     run_node, stamp_to_ns)
+from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
+from .parameters import ParamSpec, declare_params
+from .spin import request_exit, run_node
 from ..flight.sample_join import POSITION_MAX, TENSION_MAX, WIND_MAX, RejectLog, SampleJoin, state_values
 from .topics import CRASHES, POSITION, SETPOINTS, STATE, STATUS, SYNC, SYNC_NAMES, TENSION, WIND
 

@@ -82,7 +82,7 @@ def make_node(args):
     from sensor_msgs.msg import JointState
     from std_msgs.msg import UInt32
 
-    from ..nodes.common import LATCHED, RELIABLE_10, stamp_to_ns
+    from ..nodes.interface import LATCHED, RELIABLE_10, stamp_to_ns
     from ..nodes.topics import CRASHES, STATE
 
     name = args.name or "fault_relay" + "".join(c if c.isalnum() else "_" for c in args.out)
@@ -185,7 +185,7 @@ def make_node(args):
 def main(argv=None) -> int:
     from rclpy.utilities import remove_ros_args
 
-    from ..nodes.common import run_node
+    from ..nodes.spin import run_node
 
     argv = sys.argv if argv is None else argv
     args = parse_args(remove_ros_args(argv)[1:])

@@ -32,7 +32,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
 from ..nodes import topics as T
-from ..nodes.common import LATCHED, MEASUREMENTS, RELIABLE_10
+from ..nodes.interface import LATCHED, MEASUREMENTS, RELIABLE_10
 
 __all__ = ["TOPICS", "topic_type", "type_name", "message_definition", "generated_definition", "qos_yaml",
            "McapRecording", "RecordNode", "main"]
@@ -271,7 +271,7 @@ def _make_node(args):
     from rclpy.clock import ClockType
     from rclpy.node import Node
 
-    from ..nodes.common import request_exit
+    from ..nodes.spin import request_exit
 
     class _Recorder(Node):
         def __init__(self):
@@ -312,7 +312,7 @@ def parse_args(argv=None):
 def main(argv=None) -> int:
     from rclpy.utilities import remove_ros_args
 
-    from ..nodes.common import run_node
+    from ..nodes.spin import run_node
 
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(remove_ros_args(["kite_record", *argv])[1:])
