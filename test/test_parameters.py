@@ -130,6 +130,24 @@ def test_every_parameter_has_a_description_and_numbers_have_units_and_ranges():
                 s.check(s.default)
 
 
+def test_plant_defaults_are_the_plant_config_defaults():
+    """Every plant parameter that sets a PlantConfig field defaults to that field of PlantConfig() (in deg for
+    ``*_deg``), and the defaults build PlantConfig() back; the other parameters are the node's own."""
+    from kite_rto.kite.plant import PlantConfig
+    from kite_rto.nodes.plant_node import CONFIG_FIELDS, PARAMS, config_from_params
+    config = PlantConfig()
+    specs = {s.name: s for s in PARAMS}
+    for name, path in CONFIG_FIELDS.items():
+        field = config
+        for part in path.split("."):
+            field = field[int(part)] if part.isdigit() else getattr(field, part)
+        default = math.radians(specs[name].default) if name.endswith("_deg") else specs[name].default
+        assert type(default) is type(field) and default == pytest.approx(field, rel=1e-12, abs=0), (name, path)
+    assert config_from_params({s.name: s.default for s in PARAMS}) == config
+    assert set(specs) - set(CONFIG_FIELDS) == {"mode", "rate_factor", "seed", "duration", "command_timeout",
+                                               "wait_subscribers", "resend_period"}
+
+
 def test_path_controller_retune():
     c = PathController(shared_model(), KiteParams(), DEFAULT_SETPOINTS, ControllerSettings())
     with pytest.raises(ValueError, match="dead_time cannot change in flight"):

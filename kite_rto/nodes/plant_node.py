@@ -19,21 +19,59 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
-from ..kite.params import KiteParams
-from ..kite.plant import PLANT_PARAMS, KitePlant, NoiseSettings, PlantConfig
-from ..kite.wind import TurbulenceSettings
+from ..kite.plant import KitePlant, PlantConfig
 from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, finite_floats, ns_to_stamp, stamp_to_ns
 from .parameters import ParamSpec, declare_params
 from .spin import request_exit, run_node
 from ..flight.sample_join import RejectLog
 from .topics import CLOCK, CRASHES, POSITION, STATE, STEERING, TENSION, WIND
 
-__all__ = ["PlantNode", "PARAMS", "main"]
+__all__ = ["PlantNode", "PARAMS", "CONFIG_FIELDS", "config_default", "config_from_params", "main"]
 
 _LATE_NS = 500_000_000
 """A steering command stamped up to 0.5 s before the current sample is late, not stale (both modes)."""
 
-_P = PLANT_PARAMS
+_C = PlantConfig()
+CONFIG_FIELDS = {
+    "dt": "dt", "substeps": "substeps", "dead_time": "dead_time", "rate_limit": "rate_limit",
+    **{name: f"params.{name}" for name in ("r", "area", "rho", "E", "c_E", "g_s", "w_ref", "z_ref", "shear")},
+    "turbulence": "turbulence.enabled", "turbulence_intensity": "turbulence.intensity",
+    "turbulence_length": "turbulence.length_scale", "anemometer_noise": "turbulence.anemometer_noise",
+    "noise_angle_deg": "noise.angle", "noise_rate": "noise.rate", "noise_tension": "noise.tension",
+    "launch_theta_deg": "launch_state.0",
+}
+"""Parameter -> the :class:`PlantConfig` field it sets (dotted path; a number indexes a tuple). Parameters named
+``*_deg`` are in degrees, the field in rad. Their defaults are read from ``PlantConfig()``."""
+
+
+def _field(obj, path: str):
+    for part in path.split("."):
+        obj = obj[int(part)] if part.isdigit() else getattr(obj, part)
+    return obj
+
+
+def config_default(name: str):
+    """The default of the plant parameter ``name``: its :class:`PlantConfig` field, in the parameter's unit."""
+    value = _field(_C, CONFIG_FIELDS[name])
+    return round(math.degrees(value), 9) if name.endswith("_deg") else value
+
+
+def _with(default, values: dict):
+    """``default`` (a dataclass or tuple) with the fields at the dotted paths of ``values`` replaced, built once."""
+    groups = {}
+    for path, value in values.items():
+        head, _, rest = path.partition(".")
+        groups.setdefault(head, {})[rest] = value
+    if isinstance(default, tuple):
+        out = list(default)
+        for head, sub in groups.items():
+            out[int(head)] = sub[""] if "" in sub else _with(out[int(head)], sub)
+        return tuple(out)
+    return replace(default, **{head: sub[""] if "" in sub else _with(getattr(default, head), sub)
+                               for head, sub in groups.items()})
+
+
+_d = config_default
 PARAMS = (
     ParamSpec("mode", "lockstep", "lockstep (deterministic, fast) or realtime (wall clock x rate_factor)",
               choices=("lockstep", "realtime")),
@@ -42,29 +80,36 @@ PARAMS = (
     ParamSpec("seed", 0, "seed of turbulence and measurement noise", 0, 2**31 - 1),
     ParamSpec("duration", 0.0, "simulated time after which the node exits (0: run until stopped)", 0.0, 1e7,
               unit="s", runtime=True),
-    ParamSpec("dt", 0.02, "sample time", 0.001, 0.1, unit="s"),
-    ParamSpec("substeps", 1, "RK4 steps per sample", 1, 100, unit="steps"),
-    ParamSpec("dead_time", 0.25, "steering dead time (rounded to whole samples)", 0.0, 5.0, unit="s"),
-    ParamSpec("rate_limit", 5.0, "steering rate limit (normalized delta per second)", 0.01, 1000.0, unit="1/s"),
-    ParamSpec("r", _P.r, "tether length", 1.0, 5000.0, unit="m"),
-    ParamSpec("area", _P.area, "kite area", 0.1, 5000.0, unit="m^2"),
-    ParamSpec("rho", _P.rho, "air density", 0.1, 2.0, unit="kg/m^3"),
-    ParamSpec("E", _P.E, "glide ratio of the real kite (> c_E)", 0.5, 30.0, unit="dimensionless"),
-    ParamSpec("c_E", _P.c_E, "glide loss when steering: E - c_E delta^2 (< E)", 0.0, 30.0, unit="dimensionless"),
-    ParamSpec("g_s", _P.g_s, "turning constant", 0.001, 1.0, unit="rad/m"),
-    ParamSpec("w_ref", _P.w_ref, "mean wind at z_ref", 0.5, 40.0, unit="m/s"),
-    ParamSpec("z_ref", _P.z_ref, "reference height of the wind profile", 0.5, 200.0, unit="m"),
-    ParamSpec("shear", _P.shear, "wind shear exponent: w = w_ref (z/z_ref)^shear", 0.0, 1.0, unit="dimensionless"),
-    ParamSpec("turbulence", True, "turbulence on the reference wind"),
-    ParamSpec("turbulence_intensity", 0.14, "gust standard deviation / mean wind", 0.0, 1.0, unit="dimensionless"),
-    ParamSpec("turbulence_length", 100.0, "turbulence length scale L_W (tau = L_W / w_ref)", 1.0, 10000.0, unit="m"),
-    ParamSpec("anemometer_noise", 0.1, "anemometer white-noise standard deviation", 0.0, 10.0, unit="m/s"),
-    ParamSpec("noise_angle_deg", 0.1, "angle measurement noise standard deviation", 0.0, 10.0, unit="deg"),
-    ParamSpec("noise_rate", 0.005, "angular-rate measurement noise standard deviation", 0.0, 1.0, unit="rad/s"),
-    ParamSpec("noise_tension", 0.01, "relative tension noise standard deviation (0.01 = 1 %)", 0.0, 1.0,
+    ParamSpec("dt", _d("dt"), "sample time", 0.001, 0.1, unit="s"),
+    ParamSpec("substeps", _d("substeps"), "RK4 steps per sample", 1, 100, unit="steps"),
+    ParamSpec("dead_time", _d("dead_time"), "steering dead time (rounded to whole samples)", 0.0, 5.0, unit="s"),
+    ParamSpec("rate_limit", _d("rate_limit"), "steering rate limit (normalized delta per second)", 0.01, 1000.0,
+              unit="1/s"),
+    ParamSpec("r", _d("r"), "tether length", 1.0, 5000.0, unit="m"),
+    ParamSpec("area", _d("area"), "kite area", 0.1, 5000.0, unit="m^2"),
+    ParamSpec("rho", _d("rho"), "air density", 0.1, 2.0, unit="kg/m^3"),
+    ParamSpec("E", _d("E"), "glide ratio of the real kite (> c_E)", 0.5, 30.0, unit="dimensionless"),
+    ParamSpec("c_E", _d("c_E"), "glide loss when steering: E - c_E delta^2 (< E)", 0.0, 30.0, unit="dimensionless"),
+    ParamSpec("g_s", _d("g_s"), "turning constant", 0.001, 1.0, unit="rad/m"),
+    ParamSpec("w_ref", _d("w_ref"), "mean wind at z_ref", 0.5, 40.0, unit="m/s"),
+    ParamSpec("z_ref", _d("z_ref"), "reference height of the wind profile", 0.5, 200.0, unit="m"),
+    ParamSpec("shear", _d("shear"), "wind shear exponent: w = w_ref (z/z_ref)^shear", 0.0, 1.0,
               unit="dimensionless"),
-    ParamSpec("launch_theta_deg", 30.0, "theta after launch and after a crash (phi = psi = 0)", 1.0, 89.0,
+    ParamSpec("turbulence", _d("turbulence"), "turbulence on the reference wind"),
+    ParamSpec("turbulence_intensity", _d("turbulence_intensity"), "gust standard deviation / mean wind", 0.0, 1.0,
+              unit="dimensionless"),
+    ParamSpec("turbulence_length", _d("turbulence_length"), "turbulence length scale L_W (tau = L_W / w_ref)", 1.0,
+              10000.0, unit="m"),
+    ParamSpec("anemometer_noise", _d("anemometer_noise"), "anemometer white-noise standard deviation", 0.0, 10.0,
+              unit="m/s"),
+    ParamSpec("noise_angle_deg", _d("noise_angle_deg"), "angle measurement noise standard deviation", 0.0, 10.0,
               unit="deg"),
+    ParamSpec("noise_rate", _d("noise_rate"), "angular-rate measurement noise standard deviation", 0.0, 1.0,
+              unit="rad/s"),
+    ParamSpec("noise_tension", _d("noise_tension"), "relative tension noise standard deviation (0.01 = 1 %)", 0.0,
+              1.0, unit="dimensionless"),
+    ParamSpec("launch_theta_deg", _d("launch_theta_deg"), "theta after launch and after a crash (phi = psi = 0)",
+              1.0, 89.0, unit="deg"),
     ParamSpec("command_timeout", 1.0, "wall time without steering before flying neutral", 0.01, 60.0,
               unit="s (wall)", runtime=True),
     ParamSpec("wait_subscribers", 1, "lockstep: subscribers of /kite/state to wait for before the first step", 0,
@@ -76,13 +121,8 @@ PARAMS = (
 
 def config_from_params(v: dict) -> PlantConfig:
     """Build the plant configuration from checked parameter values (raises ParameterError)."""
-    params = KiteParams(**{k: v[k] for k in ("r", "area", "rho", "E", "c_E", "g_s", "w_ref", "z_ref", "shear")})
-    turb = replace(TurbulenceSettings(), enabled=v["turbulence"], intensity=v["turbulence_intensity"],
-                   length_scale=v["turbulence_length"], anemometer_noise=v["anemometer_noise"])
-    noise = NoiseSettings(math.radians(v["noise_angle_deg"]), v["noise_rate"], v["noise_tension"])
-    return PlantConfig(params=params, dt=v["dt"], substeps=v["substeps"], dead_time=v["dead_time"],
-                       rate_limit=v["rate_limit"], turbulence=turb, noise=noise,
-                       launch_state=(math.radians(v["launch_theta_deg"]), 0.0, 0.0))
+    return _with(_C, {path: math.radians(v[name]) if name.endswith("_deg") else v[name]
+                      for name, path in CONFIG_FIELDS.items()})
 
 
 def _state_msg(stamp, position, velocity) -> JointState:
