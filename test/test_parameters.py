@@ -134,7 +134,7 @@ def test_plant_defaults_are_the_plant_config_defaults():
     """Every plant parameter that sets a PlantConfig field defaults to that field of PlantConfig() (in deg for
     ``*_deg``), and the defaults build PlantConfig() back; the other parameters are the node's own."""
     from kite_rto.kite.plant import PlantConfig
-    from kite_rto.nodes.plant_node import CONFIG_FIELDS, PARAMS, config_from_params
+    from kite_rto.nodes.plant_config import CONFIG_FIELDS, PARAMS, config_from_params
     config = PlantConfig()
     specs = {s.name: s for s in PARAMS}
     for name, path in CONFIG_FIELDS.items():
@@ -235,7 +235,7 @@ def test_optimizer_runtime_limits_and_cross_checks(rcl, tmp_path):
     assert r.successful and node.p["n_iter"] == 2 and node.p["exit_when_done"] is True
     assert_rejected(node.set_parameters([Parameter("n_iter", value=-1)])[0], "parameter n_iter = -1", "[0, 10000]")
     assert_rejected(node.set_parameters([Parameter("filter_gain", value=0.5)])[0], "filter_gain", READ_ONLY)
-    node.done, node.phase = True, "done"                                            # the run has ended
+    node.run.done, node.run.phase = True, "done"                                        # the run has ended
     assert_rejected(node.set_parameters([Parameter("n_iter", value=5)])[0], "parameter n_iter = 5",
                     "restart the node")
     # exit_when_done set after the run ended: the node exits (SystemExit out of a plain executor's spin)

@@ -8,9 +8,7 @@ lockstep this starts after the first command, so a run does not depend on how lo
 """
 from __future__ import annotations
 
-import math
 import time
-from dataclasses import replace
 
 from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
 from rclpy.clock import Clock, ClockType
@@ -19,114 +17,22 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
-from ..kite.plant import KitePlant, PlantConfig
-from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, finite_floats, ns_to_stamp, stamp_to_ns
-from .parameters import ParamSpec, declare_params
+from ..kite.plant import KitePlant
+from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, finite_floats, stamp_to_ns
+from .parameters import declare_params
+from .plant_config import PARAMS, config_from_params
 from .spin import request_exit, run_node
 from ..flight.sample_join import RejectLog
+from .wire import JointStateReader, MessageTemplate
 from .topics import CLOCK, CRASHES, POSITION, STATE, STEERING, TENSION, WIND
 
-__all__ = ["PlantNode", "PARAMS", "CONFIG_FIELDS", "config_default", "config_from_params", "main"]
+__all__ = ["PlantNode", "PARAMS", "main"]
 
 _LATE_NS = 500_000_000
 """A steering command stamped up to 0.5 s before the current sample is late, not stale (both modes)."""
 
-_C = PlantConfig()
-CONFIG_FIELDS = {
-    "dt": "dt", "substeps": "substeps", "dead_time": "dead_time", "rate_limit": "rate_limit",
-    **{name: f"params.{name}" for name in ("r", "area", "rho", "E", "c_E", "g_s", "w_ref", "z_ref", "shear")},
-    "turbulence": "turbulence.enabled", "turbulence_intensity": "turbulence.intensity",
-    "turbulence_length": "turbulence.length_scale", "anemometer_noise": "turbulence.anemometer_noise",
-    "noise_angle_deg": "noise.angle", "noise_rate": "noise.rate", "noise_tension": "noise.tension",
-    "launch_theta_deg": "launch_state.0",
-}
-"""Parameter -> the :class:`PlantConfig` field it sets (dotted path; a number indexes a tuple). Parameters named
-``*_deg`` are in degrees, the field in rad. Their defaults are read from ``PlantConfig()``."""
-
-
-def _field(obj, path: str):
-    for part in path.split("."):
-        obj = obj[int(part)] if part.isdigit() else getattr(obj, part)
-    return obj
-
-
-def config_default(name: str):
-    """The default of the plant parameter ``name``: its :class:`PlantConfig` field, in the parameter's unit."""
-    value = _field(_C, CONFIG_FIELDS[name])
-    return round(math.degrees(value), 9) if name.endswith("_deg") else value
-
-
-def _with(default, values: dict):
-    """``default`` (a dataclass or tuple) with the fields at the dotted paths of ``values`` replaced, built once."""
-    groups = {}
-    for path, value in values.items():
-        head, _, rest = path.partition(".")
-        groups.setdefault(head, {})[rest] = value
-    if isinstance(default, tuple):
-        out = list(default)
-        for head, sub in groups.items():
-            out[int(head)] = sub[""] if "" in sub else _with(out[int(head)], sub)
-        return tuple(out)
-    return replace(default, **{head: sub[""] if "" in sub else _with(getattr(default, head), sub)
-                               for head, sub in groups.items()})
-
-
-_d = config_default
-PARAMS = (
-    ParamSpec("mode", "lockstep", "lockstep (deterministic, fast) or realtime (wall clock x rate_factor)",
-              choices=("lockstep", "realtime")),
-    ParamSpec("rate_factor", 1.0, "realtime mode: simulated seconds per wall second", 0.01, 100.0,
-              unit="sim s/wall s", runtime=True),
-    ParamSpec("seed", 0, "seed of turbulence and measurement noise", 0, 2**31 - 1),
-    ParamSpec("duration", 0.0, "simulated time after which the node exits (0: run until stopped)", 0.0, 1e7,
-              unit="s", runtime=True),
-    ParamSpec("dt", _d("dt"), "sample time", 0.001, 0.1, unit="s"),
-    ParamSpec("substeps", _d("substeps"), "RK4 steps per sample", 1, 100, unit="steps"),
-    ParamSpec("dead_time", _d("dead_time"), "steering dead time (rounded to whole samples)", 0.0, 5.0, unit="s"),
-    ParamSpec("rate_limit", _d("rate_limit"), "steering rate limit (normalized delta per second)", 0.01, 1000.0,
-              unit="1/s"),
-    ParamSpec("r", _d("r"), "tether length", 1.0, 5000.0, unit="m"),
-    ParamSpec("area", _d("area"), "kite area", 0.1, 5000.0, unit="m^2"),
-    ParamSpec("rho", _d("rho"), "air density", 0.1, 2.0, unit="kg/m^3"),
-    ParamSpec("E", _d("E"), "glide ratio of the real kite (> c_E)", 0.5, 30.0, unit="dimensionless"),
-    ParamSpec("c_E", _d("c_E"), "glide loss when steering: E - c_E delta^2 (< E)", 0.0, 30.0, unit="dimensionless"),
-    ParamSpec("g_s", _d("g_s"), "turning constant", 0.001, 1.0, unit="rad/m"),
-    ParamSpec("w_ref", _d("w_ref"), "mean wind at z_ref", 0.5, 40.0, unit="m/s"),
-    ParamSpec("z_ref", _d("z_ref"), "reference height of the wind profile", 0.5, 200.0, unit="m"),
-    ParamSpec("shear", _d("shear"), "wind shear exponent: w = w_ref (z/z_ref)^shear", 0.0, 1.0,
-              unit="dimensionless"),
-    ParamSpec("turbulence", _d("turbulence"), "turbulence on the reference wind"),
-    ParamSpec("turbulence_intensity", _d("turbulence_intensity"), "gust standard deviation / mean wind", 0.0, 1.0,
-              unit="dimensionless"),
-    ParamSpec("turbulence_length", _d("turbulence_length"), "turbulence length scale L_W (tau = L_W / w_ref)", 1.0,
-              10000.0, unit="m"),
-    ParamSpec("anemometer_noise", _d("anemometer_noise"), "anemometer white-noise standard deviation", 0.0, 10.0,
-              unit="m/s"),
-    ParamSpec("noise_angle_deg", _d("noise_angle_deg"), "angle measurement noise standard deviation", 0.0, 10.0,
-              unit="deg"),
-    ParamSpec("noise_rate", _d("noise_rate"), "angular-rate measurement noise standard deviation", 0.0, 1.0,
-              unit="rad/s"),
-    ParamSpec("noise_tension", _d("noise_tension"), "relative tension noise standard deviation (0.01 = 1 %)", 0.0,
-              1.0, unit="dimensionless"),
-    ParamSpec("launch_theta_deg", _d("launch_theta_deg"), "theta after launch and after a crash (phi = psi = 0)",
-              1.0, 89.0, unit="deg"),
-    ParamSpec("command_timeout", 1.0, "wall time without steering before flying neutral", 0.01, 60.0,
-              unit="s (wall)", runtime=True),
-    ParamSpec("wait_subscribers", 1, "lockstep: subscribers of /kite/state to wait for before the first step", 0,
-              100, unit="subscribers", runtime=True),
-    ParamSpec("resend_period", 0.2, "lockstep: wall time before an unanswered sample is re-published", 0.005, 10.0,
-              unit="s (wall)", runtime=True),
-)
-
-
-def config_from_params(v: dict) -> PlantConfig:
-    """Build the plant configuration from checked parameter values (raises ParameterError)."""
-    return _with(_C, {path: math.radians(v[name]) if name.endswith("_deg") else v[name]
-                      for name, path in CONFIG_FIELDS.items()})
-
-
-def _state_msg(stamp, position, velocity) -> JointState:
-    s = JointState(name=["theta", "phi", "psi"], position=position, velocity=velocity)
+def _state_msg(stamp, v) -> JointState:
+    s = JointState(name=["theta", "phi", "psi"], position=v[:3], velocity=v[3:])
     s.header.stamp = stamp
     s.header.frame_id = "anchor"
     return s
@@ -140,20 +46,24 @@ def _position_msg(stamp, v) -> PointStamped:
     return p
 
 
-def _tension_msg(stamp, tension: float) -> WrenchStamped:
+def _tension_msg(stamp, v) -> WrenchStamped:
     w = WrenchStamped()
     w.header.stamp = stamp
     w.header.frame_id = "tether"
-    w.wrench.force.x = tension
+    w.wrench.force.x = v[0]
     return w
 
 
-def _wind_msg(stamp, wind: float) -> Vector3Stamped:
+def _wind_msg(stamp, v) -> Vector3Stamped:
     w = Vector3Stamped()
     w.header.stamp = stamp
     w.header.frame_id = "anchor"
-    w.vector.x = wind
+    w.vector.x = v[0]
     return w
+
+
+def _clock_msg(stamp, v) -> ClockMsg:
+    return ClockMsg(clock=stamp)
 
 
 class PlantNode(Node):
@@ -173,7 +83,15 @@ class PlantNode(Node):
         self.pub_wind = self.create_publisher(Vector3Stamped, WIND, MEASUREMENTS)
         self.pub_crashes = self.create_publisher(UInt32, CRASHES, LATCHED)
         self.pub_crashes.publish(UInt32(data=0))
-        self.create_subscription(JointState, STEERING, self.steering_callback, RELIABLE_10)
+        self.create_subscription(JointState, STEERING, self.steering_callback, RELIABLE_10, raw=True)
+        # The sample's messages (see the builders above), serialized fast when the RMW allows it.
+        log = self.get_logger()
+        self._msg_clock = MessageTemplate(_clock_msg, 0, log)
+        self._msg_state = MessageTemplate(_state_msg, 6, log)
+        self._msg_position = MessageTemplate(_position_msg, 3, log)
+        self._msg_tension = MessageTemplate(_tension_msg, 1, log)
+        self._msg_wind = MessageTemplate(_wind_msg, 1, log)
+        self._read_steering = JointStateReader(log)
         self._finished = False
         self._first_answer = None          # (wall time, step) of the first accepted command: throughput log
         self._delta = 0.0                 # last valid command (realtime zero-order hold)
@@ -208,11 +126,18 @@ class PlantNode(Node):
             self._timer.timer_period_ns = period_ns
 
     # -------------------------------------------------------------- callbacks
-    def steering_callback(self, msg: JointState) -> None:
-        """A steering command: ``delta`` stamped with the sample it answers."""
+    def steering_callback(self, msg) -> None:
+        """A steering command: raw bytes from the node's own subscription, or a JointState."""
         if self._finished:
             return
-        stamp, position = stamp_to_ns(msg.header.stamp), msg.position
+        try:
+            if isinstance(msg, JointState):
+                stamp, position = stamp_to_ns(msg.header.stamp), msg.position
+            else:
+                stamp, position = self._read_steering(msg)
+        except ValueError as exc:
+            self._reject("steering", f"rejected steering: {exc}")
+            return
         values = finite_floats(position, 1)
         if values is None or abs(values[0]) > 1.0:
             self._reject("steering", f"rejected steering {list(position)!r}: expected one finite delta in [-1, 1]")
@@ -312,13 +237,13 @@ class PlantNode(Node):
     def publish_sample(self) -> None:
         """Publish /clock and every measurement of the current sample, all stamped with its sim time."""
         m = self.plant.measure()
-        stamp = ns_to_stamp(self.plant.k * self._dt_ns)
-        self.pub_clock.publish(ClockMsg(clock=stamp))
-        self.pub_tension.publish(_tension_msg(stamp, m.tension))
-        self.pub_position.publish(_position_msg(stamp, m.position))
-        self.pub_wind.publish(_wind_msg(stamp, m.wind_ref))
+        ns = self.plant.k * self._dt_ns
+        self.pub_clock.publish(self._msg_clock(ns, ()))
+        self.pub_tension.publish(self._msg_tension(ns, (m.tension,)))
+        self.pub_position.publish(self._msg_position(ns, m.position))
+        self.pub_wind.publish(self._msg_wind(ns, (m.wind_ref,)))
         # last: in lockstep its arrival means the sample is complete
-        self.pub_state.publish(_state_msg(stamp, [m.theta, m.phi, m.psi], [m.theta_dot, m.phi_dot, m.psi_dot]))
+        self.pub_state.publish(self._msg_state(ns, (m.theta, m.phi, m.psi, m.theta_dot, m.phi_dot, m.psi_dot)))
         self._last_publish = time.monotonic()
         if not self._sample0_to_all and self.pub_state.get_subscription_count() >= self.p["wait_subscribers"]:
             self._sample0_to_all = True
