@@ -18,12 +18,11 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
 from ..kite.plant import KitePlant
-from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, finite_floats, stamp_to_ns
+from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, finite_floats, ns_to_stamp, stamp_to_ns
 from .parameters import declare_params
 from .plant_config import PARAMS, config_from_params
 from .spin import request_exit, run_node
 from ..flight.sample_join import RejectLog
-from .wire import JointStateReader, MessageTemplate
 from .topics import CLOCK, CRASHES, POSITION, STATE, STEERING, TENSION, WIND
 
 __all__ = ["PlantNode", "PARAMS", "main"]
@@ -31,8 +30,8 @@ __all__ = ["PlantNode", "PARAMS", "main"]
 _LATE_NS = 500_000_000
 """A steering command stamped up to 0.5 s before the current sample is late, not stale (both modes)."""
 
-def _state_msg(stamp, v) -> JointState:
-    s = JointState(name=["theta", "phi", "psi"], position=v[:3], velocity=v[3:])
+def _state_msg(stamp, position, velocity) -> JointState:
+    s = JointState(name=["theta", "phi", "psi"], position=position, velocity=velocity)
     s.header.stamp = stamp
     s.header.frame_id = "anchor"
     return s
@@ -46,24 +45,20 @@ def _position_msg(stamp, v) -> PointStamped:
     return p
 
 
-def _tension_msg(stamp, v) -> WrenchStamped:
+def _tension_msg(stamp, tension: float) -> WrenchStamped:
     w = WrenchStamped()
     w.header.stamp = stamp
     w.header.frame_id = "tether"
-    w.wrench.force.x = v[0]
+    w.wrench.force.x = tension
     return w
 
 
-def _wind_msg(stamp, v) -> Vector3Stamped:
+def _wind_msg(stamp, wind: float) -> Vector3Stamped:
     w = Vector3Stamped()
     w.header.stamp = stamp
     w.header.frame_id = "anchor"
-    w.vector.x = v[0]
+    w.vector.x = wind
     return w
-
-
-def _clock_msg(stamp, v) -> ClockMsg:
-    return ClockMsg(clock=stamp)
 
 
 class PlantNode(Node):
@@ -83,15 +78,7 @@ class PlantNode(Node):
         self.pub_wind = self.create_publisher(Vector3Stamped, WIND, MEASUREMENTS)
         self.pub_crashes = self.create_publisher(UInt32, CRASHES, LATCHED)
         self.pub_crashes.publish(UInt32(data=0))
-        self.create_subscription(JointState, STEERING, self.steering_callback, RELIABLE_10, raw=True)
-        # The sample's messages (see the builders above), serialized fast when the RMW allows it.
-        log = self.get_logger()
-        self._msg_clock = MessageTemplate(_clock_msg, 0, log)
-        self._msg_state = MessageTemplate(_state_msg, 6, log)
-        self._msg_position = MessageTemplate(_position_msg, 3, log)
-        self._msg_tension = MessageTemplate(_tension_msg, 1, log)
-        self._msg_wind = MessageTemplate(_wind_msg, 1, log)
-        self._read_steering = JointStateReader(log)
+        self.create_subscription(JointState, STEERING, self.steering_callback, RELIABLE_10)
         self._finished = False
         self._first_answer = None          # (wall time, step) of the first accepted command: throughput log
         self._delta = 0.0                 # last valid command (realtime zero-order hold)
@@ -126,18 +113,11 @@ class PlantNode(Node):
             self._timer.timer_period_ns = period_ns
 
     # -------------------------------------------------------------- callbacks
-    def steering_callback(self, msg) -> None:
-        """A steering command: raw bytes from the node's own subscription, or a JointState."""
+    def steering_callback(self, msg: JointState) -> None:
+        """A steering command: ``delta`` stamped with the sample it answers."""
         if self._finished:
             return
-        try:
-            if isinstance(msg, JointState):
-                stamp, position = stamp_to_ns(msg.header.stamp), msg.position
-            else:
-                stamp, position = self._read_steering(msg)
-        except ValueError as exc:
-            self._reject("steering", f"rejected steering: {exc}")
-            return
+        stamp, position = stamp_to_ns(msg.header.stamp), msg.position
         values = finite_floats(position, 1)
         if values is None or abs(values[0]) > 1.0:
             self._reject("steering", f"rejected steering {list(position)!r}: expected one finite delta in [-1, 1]")
@@ -237,13 +217,13 @@ class PlantNode(Node):
     def publish_sample(self) -> None:
         """Publish /clock and every measurement of the current sample, all stamped with its sim time."""
         m = self.plant.measure()
-        ns = self.plant.k * self._dt_ns
-        self.pub_clock.publish(self._msg_clock(ns, ()))
-        self.pub_tension.publish(self._msg_tension(ns, (m.tension,)))
-        self.pub_position.publish(self._msg_position(ns, m.position))
-        self.pub_wind.publish(self._msg_wind(ns, (m.wind_ref,)))
+        stamp = ns_to_stamp(self.plant.k * self._dt_ns)
+        self.pub_clock.publish(ClockMsg(clock=stamp))
+        self.pub_tension.publish(_tension_msg(stamp, m.tension))
+        self.pub_position.publish(_position_msg(stamp, m.position))
+        self.pub_wind.publish(_wind_msg(stamp, m.wind_ref))
         # last: in lockstep its arrival means the sample is complete
-        self.pub_state.publish(self._msg_state(ns, (m.theta, m.phi, m.psi, m.theta_dot, m.phi_dot, m.psi_dot)))
+        self.pub_state.publish(_state_msg(stamp, [m.theta, m.phi, m.psi], [m.theta_dot, m.phi_dot, m.psi_dot]))
         self._last_publish = time.monotonic()
         if not self._sample0_to_all and self.pub_state.get_subscription_count() >= self.p["wait_subscribers"]:
             self._sample0_to_all = True

@@ -223,13 +223,12 @@ def read_mcap(path) -> SimpleNamespace:
     """
     from mcap.reader import make_reader
     from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import JointState
 
     from ..nodes.interface import stamp_to_ns
-    from ..nodes.wire import JointStateReader
     from ..nodes import topics as T
     from .record import TOPICS
 
-    read_state = JointStateReader()
     wanted = [T.STATE, T.LAPS, T.SETPOINTS, T.STATUS, T.REFERENCE_PATH, T.CRASHES]
     t, theta, phi = [], [], []
     data = SimpleNamespace(laps=[], setpoints=[], status=[], reference=None, crashes=0, topics={})
@@ -242,7 +241,8 @@ def read_mcap(path) -> SimpleNamespace:
         for _schema, channel, message in reader.iter_messages(topics=wanted, log_time_order=True):
             topic = channel.topic
             if topic == T.STATE:
-                ns, pos = read_state(message.data)
+                state = deserialize_message(message.data, JointState)
+                ns, pos = stamp_to_ns(state.header.stamp), state.position
                 if not t or ns * 1e-9 > t[-1]:
                     t.append(ns * 1e-9)
                     theta.append(pos[0])
