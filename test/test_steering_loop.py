@@ -7,6 +7,7 @@ import pytest
 
 from kite_rto.flight.controller import ControllerSettings, PathController
 from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints
+from kite_rto.flight.sample_join import Place, Timeline
 from kite_rto.flight.steering_loop import SETPOINTS_WAIT, SYNC_ABSENT, SYNC_NAMES, SteeringLoop
 from kite_rto.kite.params import KiteParams
 from kite_rto.kite.plant import KitePlant, PlantConfig, shared_model
@@ -208,3 +209,21 @@ def test_sync_timeout_falls_back_to_the_latest_setpoints(optimizer):
     rig.sample(2)
     assert len(rig.answers) == 3
     np.testing.assert_array_equal([s for s, _ in rig.answers], [0, DT_NS, 2 * DT_NS])
+
+
+def test_timeline_rule_shared_by_both_joins():
+    """Off the timeline only a continued candidate moves it; the old timeline going on drops the candidate."""
+    tl = Timeline()
+    assert tl.place(5 * DT_NS).place is Place.NEXT                 # the first sample, wherever it lies
+    tl.last = 5 * DT_NS
+    assert tl.place(6 * DT_NS) == (Place.NEXT, None, None)
+    assert tl.place(5 * DT_NS + 2 * 10**9) == (Place.CANDIDATE, None, None)          # far future
+    assert tl.place(5 * DT_NS + 2 * 10**9) == (Place.REPEATED, None, None)
+    assert tl.place(2 * DT_NS) == (Place.CANDIDATE, 5 * DT_NS + 2 * 10**9, None)     # replaces the first
+    assert tl.place(3 * DT_NS) == (Place.RESTART, None, 2 * DT_NS)                   # continued: restart
+    tl.last = 3 * DT_NS
+    assert tl.place(3 * DT_NS + 3 * 10**9).place is Place.CANDIDATE
+    assert tl.place(3 * DT_NS + 3 * 10**9 + DT_NS) == (Place.JUMP, None, 3 * DT_NS + 3 * 10**9)
+    tl.last = 10 * DT_NS
+    assert tl.place(DT_NS).place is Place.CANDIDATE
+    assert tl.place(11 * DT_NS) == (Place.NEXT, DT_NS, None) and tl.candidate is None   # junk dropped

@@ -10,7 +10,8 @@ while the plant runs. A complete sample (every part with the same stamp) stamped
 stale/future junk. It is held as a candidate and only accepted when the next complete sample continues it (a later
 stamp within the gap); if the old timeline goes on instead, it was junk and is reported. A lone part whose stamp
 matches no complete sample is never used; if it is far from the timeline it is reported as stale or future too
-(:attr:`SampleJoin.discarded`).
+(:attr:`SampleJoin.discarded`). The rule is :class:`Timeline`, the one the controller's
+:class:`~kite_rto.flight.steering_loop.SteeringLoop` follows too.
 """
 from __future__ import annotations
 
@@ -20,8 +21,8 @@ import time
 from types import SimpleNamespace
 from typing import NamedTuple
 
-__all__ = ["SampleJoin", "Timeline", "Place", "Placement", "RejectLog", "state_values", "reading_error", "MAX_STAMP_GAP_NS", "ANGLE_MAX", "PSI_MAX", "RATE_MAX",
-           "TENSION_MAX", "POSITION_MAX", "WIND_MAX"]
+__all__ = ["SampleJoin", "Timeline", "Place", "Placement", "RejectLog", "state_values", "reading_error",
+           "MAX_STAMP_GAP_NS", "ANGLE_MAX", "PSI_MAX", "RATE_MAX", "TENSION_MAX", "POSITION_MAX", "WIND_MAX"]
 
 PARTS = ("state", "tension", "position", "wind")
 

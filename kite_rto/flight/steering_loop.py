@@ -10,11 +10,10 @@ the :class:`~.sample_join.Timeline` rule shared with :class:`~.sample_join.Sampl
 answered by a fresh controller, kept if the restart is confirmed; the flying controller never sees it. Bad
 readings, or readings stamped far from the last sample, are rejected with throttled warnings.
 
-Synchronization (``sync=True``): the optimizer's sync message for sample k carries the setpoints in force and
-the count of its setpoint messages; sample k is answered once it is in, a changed count applying the setpoints
-first (the pure runner's order). A held sample is released unsynchronized after ``sync_timeout``, or after
-:data:`SYNC_ABSENT` s without an optimizer in the graph (asked only then); from then on samples are answered at
-once and setpoints apply directly, until a sync message arrives again.
+Synchronization (``sync=True``): sample k is answered once the optimizer's sync message for it is in (the
+setpoints in force, applied first when its count of setpoint messages changed: the pure runner's order), or
+unsynchronized after ``sync_timeout`` (:data:`SYNC_ABSENT` s without an optimizer in the graph), then at once
+until a sync message arrives again.
 """
 from __future__ import annotations
 
@@ -28,7 +27,7 @@ from .laps import LapDetector
 from .path import Setpoints, SetpointError
 from .sample_join import Place, RejectLog, Timeline, reading_error, state_values
 
-__all__ = ["SteeringLoop", "SYNC_ABSENT", "SETPOINTS_GRACE", "SETPOINTS_WAIT", "SYNC_NAMES"]
+__all__ = ["SteeringLoop", "fmt_setpoints", "SYNC_ABSENT", "SETPOINTS_GRACE", "SETPOINTS_WAIT", "SYNC_NAMES"]
 
 SYNC_ABSENT = 1.0
 """Wall s a sample waits for /rto/sync before the controller asks whether an optimizer is in the graph at all."""
@@ -227,15 +226,14 @@ class SteeringLoop:
         if place is Place.NEXT:
             self._restart = None
             return True
-        if place is Place.RESTART:
-            self.log.warning(f"sim time jumped back ({last * 1e-9:.2f} s -> {confirmed * 1e-9:.2f} s): "
-                             "plant restarted, re-synchronizing")
-            self.controller = self._restart[0]
-            self.laps.reset()
-        elif place is Place.JUMP:
-            self.log.warning(f"sim time jumped forward ({last * 1e-9:.2f} s -> {confirmed * 1e-9:.2f} s): "
-                             "samples were lost")
         if place in (Place.RESTART, Place.JUMP):
+            back = place is Place.RESTART
+            self.log.warning(f"sim time jumped {'back' if back else 'forward'} ({last * 1e-9:.2f} s -> "
+                             f"{confirmed * 1e-9:.2f} s): " + ("plant restarted, re-synchronizing" if back
+                                                              else "samples were lost"))
+            if back:
+                self.controller = self._restart[0]
+                self.laps.reset()
             self._restart = self._pending = None
             return True
         if place is Place.REPEATED:                     # the candidate re-published: the same answer
@@ -275,12 +273,10 @@ class SteeringLoop:
             if not self._setpoints_in:
                 self.log.info(f"new setpoints {fmt_setpoints(Setpoints.from_array(c))} received; synchronized "
                               "with the optimizer: setpoints apply at the sample of its /rto/sync")
-            self._setpoints_msg = c
-            self._setpoints_in = True
+        elif not self._apply_setpoints(c):
             return
-        if self._apply_setpoints(c):
-            self._setpoints_msg = c
-            self._setpoints_in = True
+        self._setpoints_msg = c
+        self._setpoints_in = True
 
     def _apply_setpoints(self, c) -> bool:
         """Fly the setpoints ``c`` (rad): at once before the first sample, else blended; False if refused."""
