@@ -23,7 +23,7 @@ from std_msgs.msg import UInt32
 
 from kite_rto.kite.params import KiteParams
 from kite_rto.flight.path import SetpointBox, SetpointError, validate_setpoints
-from kite_rto.nodes.common import LATCHED, RELIABLE_10, stamp_to_ns
+from kite_rto.nodes.interface import LATCHED, RELIABLE_10, stamp_to_ns
 from kite_rto.tools.graph import node_command
 from rosutil import Probe
 

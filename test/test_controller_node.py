@@ -9,7 +9,7 @@ from sensor_msgs.msg import JointState
 
 from kite_rto.flight.closed_loop import make_closed_loop, run_closed_loop
 from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints
-from kite_rto.nodes.common import LATCHED, RELIABLE_10, stamp_to_ns
+from kite_rto.nodes.interface import LATCHED, RELIABLE_10, stamp_to_ns
 
 from rosutil import Probe, start_node, stop
 

@@ -24,7 +24,7 @@ from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints
 from kite_rto.flight.shape import setpoints_from_shape
 from kite_rto.kite.plant import PlantConfig
 from kite_rto.gma import HistoryStore
-from kite_rto.nodes.common import LATCHED, RELIABLE_10, ns_to_stamp, stamp_to_ns
+from kite_rto.nodes.interface import LATCHED, RELIABLE_10, ns_to_stamp, stamp_to_ns
 
 from faultgraph import QUIET, SHORT, Watch, node, steering_recorder, stop_all
 from faultlog import fault_row

@@ -19,7 +19,7 @@ from sensor_msgs.msg import JointState
 
 from kite_rto.flight.closed_loop import make_closed_loop, run_closed_loop
 from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints
-from kite_rto.nodes.common import RELIABLE_10, stamp_to_ns
+from kite_rto.nodes.interface import RELIABLE_10, stamp_to_ns
 
 from faultgraph import DomainProbe, Watch, node, relay, relay_summary, spin_all, steering_recorder, stop_all
 from faultlog import fault_row

@@ -12,7 +12,7 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from sensor_msgs.msg import JointState
 
-from kite_rto.nodes.common import LATCHED, RELIABLE_10, ns_to_stamp
+from kite_rto.nodes.interface import LATCHED, RELIABLE_10, ns_to_stamp
 from kite_rto.nodes.controller_node import LAP_FIELDS
 from kite_rto.tools.echo import to_yaml
 from kite_rto.tools.monitor import Monitor, format_lap, format_status

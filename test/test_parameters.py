@@ -21,7 +21,8 @@ from kite_rto.flight.controller import ControllerSettings, PathController
 from kite_rto.kite.params import KiteParams, ParameterError
 from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints
 from kite_rto.kite.model import shared_model
-from kite_rto.nodes.common import READ_ONLY, RELIABLE_10, ParamSpec, ns_to_stamp
+from kite_rto.nodes.interface import RELIABLE_10, ns_to_stamp
+from kite_rto.nodes.parameters import READ_ONLY, ParamSpec
 from kite_rto.tools.graph import node_command
 
 from rosutil import Probe, start_node, stop
@@ -129,6 +130,24 @@ def test_every_parameter_has_a_description_and_numbers_have_units_and_ranges():
                 s.check(s.default)
 
 
+def test_plant_defaults_are_the_plant_config_defaults():
+    """Every plant parameter that sets a PlantConfig field defaults to that field of PlantConfig() (in deg for
+    ``*_deg``), and the defaults build PlantConfig() back; the other parameters are the node's own."""
+    from kite_rto.kite.plant import PlantConfig
+    from kite_rto.nodes.plant_config import CONFIG_FIELDS, PARAMS, config_from_params
+    config = PlantConfig()
+    specs = {s.name: s for s in PARAMS}
+    for name, path in CONFIG_FIELDS.items():
+        field = config
+        for part in path.split("."):
+            field = field[int(part)] if part.isdigit() else getattr(field, part)
+        default = math.radians(specs[name].default) if name.endswith("_deg") else specs[name].default
+        assert type(default) is type(field) and default == pytest.approx(field, rel=1e-12, abs=0), (name, path)
+    assert config_from_params({s.name: s.default for s in PARAMS}) == config
+    assert set(specs) - set(CONFIG_FIELDS) == {"mode", "rate_factor", "seed", "duration", "command_timeout",
+                                               "wait_subscribers", "resend_period"}
+
+
 def test_path_controller_retune():
     c = PathController(shared_model(), KiteParams(), DEFAULT_SETPOINTS, ControllerSettings())
     with pytest.raises(ValueError, match="dead_time cannot change in flight"):
@@ -195,12 +214,12 @@ def test_controller_retunes_the_flying_controller(rcl):
     assert node.controller.settings.k_psi == 4.0 and node.settings.box.A_phi[0] == math.radians(42.0)
     # the optimizer synchronization: its timeout changes at runtime, the switch itself does not
     r = node.set_parameters_atomically([Parameter("sync_timeout", value=2.5), Parameter("k_psi", value=3.5)])
-    assert r.successful and node._sync_timeout == 2.5 and node.controller.settings.k_psi == 3.5
+    assert r.successful and node.loop.sync_timeout == 2.5 and node.controller.settings.k_psi == 3.5
     assert_rejected(node.set_parameters([Parameter("sync_timeout", value=0.0)])[0], "parameter sync_timeout = 0.0",
                     "[0.1, 3600] s")
     assert_rejected(node.set_parameters([Parameter("sync_optimizer", value=True)])[0],
                     "parameter sync_optimizer = True", READ_ONLY)
-    assert node._sync_timeout == 2.5 and not node._sync
+    assert node.loop.sync_timeout == 2.5 and not node.loop.sync
 
 
 def test_optimizer_runtime_limits_and_cross_checks(rcl, tmp_path):
@@ -216,7 +235,7 @@ def test_optimizer_runtime_limits_and_cross_checks(rcl, tmp_path):
     assert r.successful and node.p["n_iter"] == 2 and node.p["exit_when_done"] is True
     assert_rejected(node.set_parameters([Parameter("n_iter", value=-1)])[0], "parameter n_iter = -1", "[0, 10000]")
     assert_rejected(node.set_parameters([Parameter("filter_gain", value=0.5)])[0], "filter_gain", READ_ONLY)
-    node.done, node.phase = True, "done"                                            # the run has ended
+    node.run.done, node.run.phase = True, "done"                                        # the run has ended
     assert_rejected(node.set_parameters([Parameter("n_iter", value=5)])[0], "parameter n_iter = 5",
                     "restart the node")
     # exit_when_done set after the run ended: the node exits (SystemExit out of a plain executor's spin)

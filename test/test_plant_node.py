@@ -9,7 +9,7 @@ from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from kite_rto.nodes.common import RELIABLE_10, stamp_to_ns
+from kite_rto.nodes.interface import RELIABLE_10, stamp_to_ns
 
 from rosutil import Probe, start_node, stop
 

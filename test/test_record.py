@@ -15,7 +15,7 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 
 from kite_rto.nodes import topics as T
-from kite_rto.nodes.common import ns_to_stamp
+from kite_rto.nodes.interface import ns_to_stamp
 from kite_rto.nodes.controller_node import LAP_FIELDS
 from kite_rto.tools.record import (TOPICS, McapRecording, generated_definition, message_definition, type_name)
 

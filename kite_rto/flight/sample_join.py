@@ -10,16 +10,19 @@ while the plant runs. A complete sample (every part with the same stamp) stamped
 stale/future junk. It is held as a candidate and only accepted when the next complete sample continues it (a later
 stamp within the gap); if the old timeline goes on instead, it was junk and is reported. A lone part whose stamp
 matches no complete sample is never used; if it is far from the timeline it is reported as stale or future too
-(:attr:`SampleJoin.discarded`).
+(:attr:`SampleJoin.discarded`). The rule is :class:`Timeline`, the one the controller's
+:class:`~kite_rto.flight.steering_loop.SteeringLoop` follows too.
 """
 from __future__ import annotations
 
+import enum
 import math
 import time
 from types import SimpleNamespace
+from typing import NamedTuple
 
-__all__ = ["SampleJoin", "RejectLog", "state_values", "MAX_STAMP_GAP_NS", "ANGLE_MAX", "PSI_MAX", "RATE_MAX",
-           "TENSION_MAX", "POSITION_MAX", "WIND_MAX"]
+__all__ = ["SampleJoin", "Timeline", "Place", "Placement", "RejectLog", "state_values", "reading_error",
+           "MAX_STAMP_GAP_NS", "ANGLE_MAX", "PSI_MAX", "RATE_MAX", "TENSION_MAX", "POSITION_MAX", "WIND_MAX"]
 
 PARTS = ("state", "tension", "position", "wind")
 
@@ -53,6 +56,23 @@ def state_values(names, position, velocity) -> tuple[list, list]:
     return pos, vel
 
 
+def reading_error(part: str, value) -> str | None:
+    """Why a ``tension`` (N), ``position`` ((x, y, z) m) or ``wind`` (m/s) reading is rejected, or None if plausible."""
+    if part == "tension":
+        if not (math.isfinite(value) and 0.0 <= value <= TENSION_MAX):
+            return f"rejected tension message {value!r}: expected a finite force in [0, {TENSION_MAX:g}] N"
+    elif part == "position":
+        if not all(math.isfinite(x) and abs(x) <= POSITION_MAX for x in value):
+            return f"rejected position message {list(value)!r}: expected finite coordinates within " \
+                   f"+-{POSITION_MAX:g} m"
+    elif part == "wind":
+        if not (math.isfinite(value) and 0.0 <= value < WIND_MAX):
+            return f"rejected wind message {value!r}: expected a finite speed in [0, {WIND_MAX:g}) m/s"
+    else:
+        raise ValueError(f"reading_error: unknown part {part!r}")
+    return None
+
+
 class RejectLog:
     """Throttled warnings about rejected input, throttled per ``key`` (e.g. the topic).
 
@@ -80,6 +100,65 @@ class RejectLog:
         self._logger.warning(text + (f" [{n} more rejected since the last warning]" if n else ""))
 
 
+class Place(enum.Enum):
+    """Where a complete sample falls relative to the timeline (see :meth:`Timeline.place`)."""
+
+    NEXT = "next"                  # on the timeline (or the first sample): fly on
+    RESTART = "restart"            # continues the candidate, which lay before the last sample: plant restarted
+    JUMP = "jump"                  # continues the candidate, which lay far after the last sample: samples lost
+    CANDIDATE = "candidate"        # off the timeline: held as the candidate of a new timeline
+    REPEATED = "repeated"          # the candidate again (re-published)
+
+
+class Placement(NamedTuple):
+    """:meth:`Timeline.place`'s answer: the place, a candidate dropped as junk, the candidate confirmed (ns)."""
+
+    place: Place
+    dropped: int | None = None
+    confirmed: int | None = None
+
+
+class Timeline:
+    """The restart rule, one for every node that reads the plant: where a complete sample's stamp (ns) falls.
+
+    A sample stamped after :attr:`last` by at most ``max_gap_ns`` is the next one. Any other stamp is off the
+    timeline: it becomes the :attr:`candidate` of a new timeline, confirmed only when the next complete sample
+    continues it (a later stamp within ``max_gap_ns``); if the old timeline goes on instead, the candidate is
+    dropped as junk. The caller moves :attr:`last` when it has used a sample.
+    """
+
+    def __init__(self, max_gap_ns: int = MAX_STAMP_GAP_NS):
+        self.max_gap_ns = max_gap_ns
+        self.last: int | None = None          # stamp of the last sample used, None before the first
+        self.candidate: int | None = None     # stamp of a complete sample off the timeline, not yet continued
+
+    def reset(self) -> None:
+        """Forget the timeline."""
+        self.last = self.candidate = None
+
+    def on(self, stamp: int) -> bool:
+        """True if ``stamp`` is the first or follows :attr:`last` within the gap."""
+        return self.last is None or self.last < stamp <= self.last + self.max_gap_ns
+
+    def near(self, stamp: int) -> bool:
+        """True if ``stamp`` lies within the gap of :attr:`last` (either side), or nothing was used yet."""
+        return self.last is None or abs(stamp - self.last) <= self.max_gap_ns
+
+    def place(self, stamp: int) -> Placement:
+        """Classify the complete sample ``stamp`` and update :attr:`candidate` (never :attr:`last`)."""
+        cand = self.candidate
+        if self.on(stamp):
+            self.candidate = None
+            return Placement(Place.NEXT, dropped=cand)
+        if cand is not None and cand < stamp <= cand + self.max_gap_ns:
+            self.candidate = None
+            return Placement(Place.RESTART if stamp < self.last else Place.JUMP, confirmed=cand)
+        if cand == stamp:
+            return Placement(Place.REPEATED)
+        self.candidate = stamp
+        return Placement(Place.CANDIDATE, dropped=cand)
+
+
 class SampleJoin:
     """Collects parts keyed by stamp (ns); :meth:`add` returns the completed measurement or None.
 
@@ -92,26 +171,24 @@ class SampleJoin:
 
     def __init__(self, max_pending: int = 50, max_gap_ns: int = MAX_STAMP_GAP_NS):
         self._pending: dict[int, dict] = {}
-        self._last = -1
+        self.timeline = Timeline(max_gap_ns)
         self.max_pending = max_pending
         self.max_gap_ns = max_gap_ns
         self.crashes = 0
         self.discarded: list[tuple[int, tuple]] = []
-        self._candidate = None                    # stamp of a complete sample off the timeline, not yet continued
 
     @property
     def last(self) -> int:
         """Stamp (ns) of the last complete sample, -1 before the first."""
-        return self._last
+        return -1 if self.timeline.last is None else self.timeline.last
 
     def reset(self) -> None:
         """Forget everything."""
         self._pending.clear()
-        self._last = -1
-        self._candidate = None
+        self.timeline.reset()
 
     def add(self, stamp: int, part: str, value) -> SimpleNamespace | None:
-        if stamp == self._last:
+        if stamp == self.timeline.last:
             return None                           # duplicate (lockstep re-publish)
         pending = self._pending
         entry = pending.get(stamp)
@@ -124,20 +201,12 @@ class SampleJoin:
         if len(entry) < len(PARTS):
             return None
         del pending[stamp]
-        last, gap, cand = self._last, self.max_gap_ns, self._candidate
-        if last < 0 or last < stamp <= last + gap:          # on the timeline
-            if cand is not None:
-                self.discarded.append((cand, PARTS))
-                self._candidate = None
-            jumped_back = False
-        elif cand is not None and cand < stamp <= cand + gap:   # continues the candidate: a new timeline
-            self._candidate = None
-            jumped_back = stamp < last
-        else:                                               # off the timeline: hold it as the candidate
-            if cand is not None and cand != stamp:
-                self.discarded.append((cand, PARTS))
-            self._candidate = stamp
+        place, dropped, _ = self.timeline.place(stamp)
+        if dropped is not None:
+            self.discarded.append((dropped, PARTS))
+        if place in (Place.CANDIDATE, Place.REPEATED):
             return None
+        jumped_back = place is Place.RESTART
         if pending:
             gap = self.max_gap_ns
             for s in list(pending):
@@ -147,7 +216,7 @@ class SampleJoin:
                     parts = tuple(pending.pop(s))
                     if s < stamp - gap or s > stamp + gap:
                         self.discarded.append((s, parts))
-        self._last = stamp
+        self.timeline.last = stamp
         (theta, phi, psi), tension, position, wind = (entry[p] for p in PARTS)
         return SimpleNamespace(t=stamp * 1e-9, theta=theta, phi=phi, psi=psi, tension=tension, position=position,
                                wind_ref=wind, crashes=self.crashes, stamp=stamp, jumped_back=jumped_back)

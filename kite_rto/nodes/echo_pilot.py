@@ -3,17 +3,17 @@
 Used to fly the plant in lockstep with neutral steering (the first check of a new install) and by the DDS
 lockstep benchmark. Parameter ``delta`` (normalized, [-1, 1], default 0).
 
-It answers as fast as rclpy allows: spun by the C++ events executor (``run_node(..., events=True)``), the state
-arrives as raw bytes of which only the stamp is read, and the answer is serialized by a
-:class:`~.common.MessageTemplate` (the same bytes rclpy would produce for the JointState built in
-:func:`steering_msg`). ``rclpy.spin(EchoPilot())`` works as well.
+It answers as fast as rclpy allows: spun by the C++ events executor (``run_node(..., events=True)``);
+``rclpy.spin(EchoPilot())`` works as well.
 """
 from __future__ import annotations
 
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from .common import RELIABLE_10, MessageTemplate, ParamSpec, declare_params, joint_state_from_raw, run_node, stamp_to_ns
+from .interface import RELIABLE_10
+from .parameters import ParamSpec, declare_params
+from .spin import run_node
 from .topics import STATE, STEERING
 
 __all__ = ["EchoPilot", "main", "steering_msg"]
@@ -22,9 +22,9 @@ PARAMS = (ParamSpec("delta", 0.0, "constant steering command (normalized delta)"
                     unit="dimensionless", runtime=True),)
 
 
-def steering_msg(stamp, values) -> JointState:
-    """The steering command ``delta = values[0]`` answering the state sample stamped ``stamp``."""
-    cmd = JointState(name=["delta"], position=[values[0]])
+def steering_msg(stamp, delta: float) -> JointState:
+    """The steering command ``delta`` (normalized) answering the state sample stamped ``stamp``."""
+    cmd = JointState(name=["delta"], position=[delta])
     cmd.header.stamp = stamp
     return cmd
 
@@ -35,28 +35,17 @@ class EchoPilot(Node):
     def __init__(self, **kwargs):
         super().__init__("echo_pilot", **kwargs)
         self.delta = declare_params(self, PARAMS, apply=self.apply_params)["delta"]
-        self._values = (self.delta,)
-        self._answer = MessageTemplate(steering_msg, 1)
         self.pub = self.create_publisher(JointState, STEERING, RELIABLE_10)
-        self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10, raw=True)
+        self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10)
         self.answered = 0
 
     def apply_params(self, changes: dict) -> None:
         """Runtime parameter ``delta``: the next answers carry the new command."""
         self.delta = changes["delta"]
-        self._values = (self.delta,)
 
-    def state_callback(self, msg) -> None:
-        """A state sample: raw bytes from the node's own subscription, or a JointState."""
-        if isinstance(msg, JointState):
-            stamp = stamp_to_ns(msg.header.stamp)
-        else:
-            try:
-                stamp = joint_state_from_raw(msg)[0]
-            except ValueError as exc:
-                self.get_logger().warning(f"ignored state: {exc}", throttle_duration_sec=2.0)
-                return
-        self.pub.publish(self._answer(stamp, self._values))
+    def state_callback(self, msg: JointState) -> None:
+        """A state sample: answer it with ``delta`` and the sample's stamp."""
+        self.pub.publish(steering_msg(msg.header.stamp, self.delta))
         self.answered += 1
 
 

@@ -16,7 +16,6 @@ import math
 import os
 from dataclasses import replace
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
 from rclpy.clock import Clock, ClockType
@@ -24,16 +23,17 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
-from ..rto.builder import make_gma
-from ..rto.session import RTOSession
-from ..rto.settings import KiteRTOSettings
-from ..kite.params import KiteParams, ParameterError
 from ..flight.path import Setpoints, SetpointError, validate_setpoints
 from ..flight.shape import ShapeBox, setpoints_from_shape
 from ..gma import HistoryStore
-from .common import (LATCHED, MEASUREMENTS, RELIABLE_10, ParamSpec, declare_params, ns_to_stamp, request_exit,
-                     run_node, stamp_to_ns)
-from ..flight.sample_join import POSITION_MAX, TENSION_MAX, WIND_MAX, RejectLog, SampleJoin, state_values
+from ..kite.params import KiteParams, ParameterError
+from ..rto.optimizer_run import OptimizerRun
+from ..rto.builder import make_gma
+from ..rto.session import RTOSession
+from ..rto.settings import KiteRTOSettings
+from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
+from .parameters import ParamSpec, declare_params
+from .spin import request_exit, run_node
 from .topics import CRASHES, POSITION, SETPOINTS, STATE, STATUS, SYNC, SYNC_NAMES, TENSION, WIND
 
 __all__ = ["OptimizerNode", "PARAMS", "main"]
@@ -136,32 +136,25 @@ class OptimizerNode(Node):
                                  f"{err}") from None
         if history is None:
             self.store.save_history(self.gma.history)
-        self.session = RTOSession(self.gma, spec, self.settings.max_repeats)
-        self._saved_exp = len(self.gma.history.experiments)
-        self._saved_rec = len(self.gma.records)
-        self.join = SampleJoin()
         self.pub_setpoints = self.create_publisher(JointState, SETPOINTS, LATCHED)
         self.pub_status = self.create_publisher(DiagnosticArray, STATUS, RELIABLE_10)
         self.pub_sync = self.create_publisher(JointState, SYNC, MEASUREMENTS)
-        self._c_published = None               # setpoints of the last /rto/setpoints message (rad)
-        self._updates = 0                      # /rto/setpoints messages published by this process
+        self.run = OptimizerRun(self.gma, RTOSession(self.gma, spec, self.settings.max_repeats), self.store,
+                                self.settings.box.setpoint_box(), n_iter=v["n_iter"], logger=self.get_logger(),
+                                send_setpoints=self.publish_setpoints, sync=self.publish_sync,
+                                status=self.publish_status, finished=self.finished)
+        self.session = self.run.session
         self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10)
         self.create_subscription(WrenchStamped, TENSION, self.tension_callback, RELIABLE_10)
         self.create_subscription(PointStamped, POSITION, self.position_callback, RELIABLE_10)
         self.create_subscription(Vector3Stamped, WIND, self.wind_callback, RELIABLE_10)
         self.create_subscription(UInt32, CRASHES, self.crashes_callback, LATCHED)
         self.create_timer(1.0, self.publish_status, clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self._reject_log = RejectLog(self.get_logger())
-        self._crashes_seen = 0                 # last /kite/crashes count of the current plant
-        self._crash_offset = 0                 # counts of plants that restarted (their count starts at 0 again)
-        self._started = False
-        self.done = False
-        self.phase = "waiting for the plant"
         first = self.gma.next_request()
         if history is not None:
             self.get_logger().info(f"resumed from {v['db']}: {len(history.experiments)} experiments, "
                                    f"{len(history.iterations)} iterations")
-        self.publish_setpoints(setpoints_from_shape(first.c))
+        self.run.setpoints(setpoints_from_shape(first.c))
         self.get_logger().info(f"optimizer up: first experiment {first.request_id}")
 
     def apply_params(self, changes: dict) -> None:
@@ -170,179 +163,65 @@ class OptimizerNode(Node):
         Once the run has ended, ``n_iter`` cannot change (restart the node: it resumes from ``db``), and
         setting ``exit_when_done`` to true makes the node exit (code 0) half a second later.
         """
-        if "n_iter" in changes and self.done:
-            raise ParameterError(f"parameter n_iter = {changes['n_iter']!r}: the run has ended ({self.phase}); "
+        run = self.run
+        if "n_iter" in changes and run.done:
+            raise ParameterError(f"parameter n_iter = {changes['n_iter']!r}: the run has ended ({run.phase}); "
                                  f"restart the node to run more iterations (it resumes from {self.p['db']})")
-        if changes.get("exit_when_done") and self.done and self.phase == "done":
+        if "n_iter" in changes:
+            run.n_iter = changes["n_iter"]
+        if changes.get("exit_when_done") and run.done and run.phase == "done":
             self.get_logger().info("exit_when_done set after the run ended: exiting")
             self._exit_timer = self.create_timer(0.5, lambda: request_exit(self, 0),
                                                  clock=Clock(clock_type=ClockType.STEADY_TIME))
 
-    # ------------------------------------------------------------ measurements
+    # ------------------------------------------------------------ subscriptions
     def state_callback(self, msg: JointState) -> None:
-        try:
-            pos, _ = state_values(msg.name, msg.position, msg.velocity)
-        except ValueError as err:
-            return self._reject("state", f"rejected state message: {err}")
-        self._part(msg.header.stamp, "state", pos)
+        self.run.state_reading(stamp_to_ns(msg.header.stamp), msg.name, msg.position, msg.velocity)
 
     def tension_callback(self, msg: WrenchStamped) -> None:
-        v = msg.wrench.force.x
-        if not (math.isfinite(v) and 0.0 <= v <= TENSION_MAX):
-            return self._reject("tension", f"rejected tension message {v!r}: expected a finite force in "
-                                           f"[0, {TENSION_MAX:g}] N")
-        self._part(msg.header.stamp, "tension", v)
+        self.run.reading(stamp_to_ns(msg.header.stamp), "tension", msg.wrench.force.x)
 
     def position_callback(self, msg: PointStamped) -> None:
-        p = (msg.point.x, msg.point.y, msg.point.z)
-        if not all(math.isfinite(x) and abs(x) <= POSITION_MAX for x in p):
-            return self._reject("position", f"rejected position message {list(p)!r}: expected finite coordinates "
-                                            f"within +-{POSITION_MAX:g} m")
-        self._part(msg.header.stamp, "position", p)
+        self.run.reading(stamp_to_ns(msg.header.stamp), "position", (msg.point.x, msg.point.y, msg.point.z))
 
     def wind_callback(self, msg: Vector3Stamped) -> None:
-        v = msg.vector.x
-        if not (math.isfinite(v) and 0.0 <= v < WIND_MAX):
-            return self._reject("wind", f"rejected wind message {v!r}: expected a finite speed in "
-                                        f"[0, {WIND_MAX:g}) m/s")
-        self._part(msg.header.stamp, "wind", v)
+        self.run.reading(stamp_to_ns(msg.header.stamp), "wind", msg.vector.x)
 
     def crashes_callback(self, msg: UInt32) -> None:
-        n = int(msg.data)
-        if n < self._crashes_seen:             # a restarted plant counts from 0 again: not a crash, not un-crashed
-            self._crash_offset += self._crashes_seen
-        self._crashes_seen = n
-        self.join.crashes = self._crash_offset + n
+        self.run.crashes(int(msg.data))
 
-    def _part(self, stamp_msg, part: str, value) -> None:
-        m = self.join.add(stamp_to_ns(stamp_msg), part, value)
-        if self.join.discarded:
-            s, parts = self.join.discarded[-1]
-            self._reject("stamp", f"discarded {len(self.join.discarded)} sample(s) off the timeline, the last "
-                                  f"stamped {s * 1e-9:.3f} s ({', '.join(parts)}) at sim time "
-                                  f"{self.join.last * 1e-9:.3f} s: stale or future stamps")
-            self.join.discarded.clear()
-        if m is None:
-            return
-        if m.jumped_back:
-            self.get_logger().warning(f"sim time jumped back to {m.t:.2f} s: plant restarted, the current "
-                                      "experiment starts again")
-            self._started = False
-        self.on_sample(m)
-        self.publish_sync(m.stamp)
-
-    def on_sample(self, m) -> None:
-        if self.done:
-            return
-        if not self._started:
-            self._started = True
-            if self.session.request is None:
-                self.publish_setpoints(self.session.start(m.t))
-            else:                                   # plant restart: same request, measured again
-                self.session.evaluator.start(m.t, self.session.c)
-            self.phase = "experiment"
-            return
-        request, repeats = self.session.request, self.session.repeats
-        new = self.session.on_measurement(m)
-        if self.session.request is request and self.session.repeats > repeats:
-            self.get_logger().warning(f"experiment {request.request_id} invalid (kite crashed or no lap) at "
-                                      f"t = {m.t:.2f} s: its data is discarded, repeating it "
-                                      f"({self.session.repeats}/{self.session.max_repeats})")
-        self._persist()
-        if self.session.stopped:
-            self.phase = f"failed: {self.session.message}"
-            self.get_logger().error(self.phase)
-            self.done = True
-        elif self.p["n_iter"] and len(self.gma.records) >= self.p["n_iter"]:
-            self.finish()
-        elif new is not None:
-            self.publish_setpoints(new)
-
-    def _persist(self) -> None:
-        exps = self.gma.history.experiments
-        for req, res in exps[self._saved_exp:]:
-            self.store.save_experiment(req, res)
-            self.get_logger().info(f"experiment {req.request_id}: tension {-res.cost:.1f} kN, "
-                                   f"g = {res.constraints[0]:+.1f} m, c = {self._deg(req.c)}")
-        self._saved_exp = len(exps)
-        for rec in self.gma.records[self._saved_rec:]:
-            self.store.save_iteration(rec, self.gma.history.pending)
-            self.get_logger().info(f"iteration {rec.k}: c_k = {self._deg(rec.c_k)} -> c_next = {self._deg(rec.c_next)}"
-                                   f" ({rec.decision})")
-            self.publish_status()
-        self._saved_rec = len(self.gma.records)
-
-    def finish(self) -> None:
-        rec = self.gma.records[-1]
-        self.publish_setpoints(setpoints_from_shape(rec.c_next))
-        self.done = True
-        self.phase = "done"
-        self.publish_status()
-        self.get_logger().info(f"done: {len(self.gma.records)} iterations; holding c = {self._deg(rec.c_next)}")
+    # ----------------------------------------------------------------- output
+    def finished(self) -> None:
+        """The run has done its ``n_iter`` iterations: exit if ``exit_when_done``."""
         if self.p["exit_when_done"]:
             request_exit(self, 0)
 
-    # ----------------------------------------------------------------- output
-    def publish_setpoints(self, c) -> None:
-        """Publish setpoints ``c`` (rad) after checking them against the safe box and the turn limit."""
-        box = self.settings.box.setpoint_box()
-        try:
-            validate_setpoints(np.asarray(c, dtype=float), box, KiteParams())
-        except SetpointError as err:
-            self.get_logger().error(f"refusing to publish unsafe setpoints: {err}")
-            self.session.stop(f"unsafe setpoints requested: {err}")
-            self.done = True
-            return
+    def publish_setpoints(self, c: list) -> None:
+        """Publish checked setpoints ``c`` (rad) on /rto/setpoints (latched)."""
         msg = JointState()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.name = Setpoints.names()
-        msg.position = [float(x) for x in c]
+        msg.position = c
         self.pub_setpoints.publish(msg)
-        self._c_published = list(msg.position)
-        self._updates += 1
 
     def publish_sync(self, stamp: int) -> None:
         """Tell a synchronized controller that the sample stamped ``stamp`` (ns) is processed (see the module doc)."""
-        if self._c_published is None:          # refused the first setpoints: nothing to fly
+        if self.run.c_published is None:        # refused the first setpoints: nothing to fly
             return
         msg = JointState()
         msg.header.stamp = ns_to_stamp(stamp)
         msg.name = SYNC_NAMES
-        msg.position = [*self._c_published, float(self._updates)]
+        msg.position = [*self.run.c_published, float(self.run.updates)]
         self.pub_sync.publish(msg)
 
     def publish_status(self) -> None:
         st = DiagnosticStatus(name="kite_rto/optimizer", hardware_id="kite_rto")
         st.level = DiagnosticStatus.ERROR if self.session.stopped else DiagnosticStatus.OK
-        st.message = self.phase
-        req = self.session.request
-        kv = {"iteration": len(self.gma.records), "phase": self.phase,
-              "experiments_done": len(self.gma.history.experiments)}
-        if req is not None:
-            kv.update(experiment=req.request_id, purpose=req.purpose, setpoints_deg=self._deg(req.c),
-                      experiment_t_start=f"{self.session.evaluator.t_start:.2f}")
-        if self.gma.records:
-            r = self.gma.records[-1]
-            kv.update(measured_cost_kN=f"{r.cost:.2f}", measured_constraint_m=f"{r.constraints[0]:.2f}",
-                      grad_cost=self._vec(r.grad_cost), grad_constraint=self._vec(r.jac_constraints.ravel()),
-                      eps=self._vec(r.eps), lambda_=self._vec(r.lam), mu=self._vec(r.mu.ravel()),
-                      c_star_deg=self._deg(r.c_star), c_next_deg=self._deg(r.c_next), decision=r.decision)
-        st.values = [KeyValue(key=k.rstrip("_"), value=str(v)) for k, v in kv.items()]
+        st.message = self.run.phase
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in self.run.status_values().items()]
         msg = DiagnosticArray(status=[st])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_status.publish(msg)
-
-    def _reject(self, key: str, text: str) -> None:
-        self._reject_log(key, text)
-
-    @staticmethod
-    def _deg(x) -> str:
-        """Setpoints in degrees of GMA's shape coordinates ``x``."""
-        return "(" + ", ".join(f"{math.degrees(v):.2f}" for v in setpoints_from_shape(x)) + ") deg"
-
-    @staticmethod
-    def _vec(v) -> str:
-        return "[" + ", ".join(f"{x:.4g}" for x in np.asarray(v, dtype=float).ravel()) + "]"
 
     def destroy_node(self):
         self.store.close()

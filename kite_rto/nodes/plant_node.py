@@ -8,9 +8,7 @@ lockstep this starts after the first command, so a run does not depend on how lo
 """
 from __future__ import annotations
 
-import math
 import time
-from dataclasses import replace
 
 from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
 from rclpy.clock import Clock, ClockType
@@ -19,11 +17,11 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
-from ..kite.params import KiteParams
-from ..kite.plant import PLANT_PARAMS, KitePlant, NoiseSettings, PlantConfig
-from ..kite.wind import TurbulenceSettings
-from .common import (LATCHED, MEASUREMENTS, RELIABLE_10, MessageTemplate, ParamSpec, declare_params, finite_floats, joint_state_from_raw,
-                     request_exit, run_node, stamp_to_ns)
+from ..kite.plant import KitePlant
+from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, finite_floats, ns_to_stamp, stamp_to_ns
+from .parameters import declare_params
+from .plant_config import PARAMS, config_from_params
+from .spin import request_exit, run_node
 from ..flight.sample_join import RejectLog
 from .topics import CLOCK, CRASHES, POSITION, STATE, STEERING, TENSION, WIND
 
@@ -32,60 +30,8 @@ __all__ = ["PlantNode", "PARAMS", "main"]
 _LATE_NS = 500_000_000
 """A steering command stamped up to 0.5 s before the current sample is late, not stale (both modes)."""
 
-_P = PLANT_PARAMS
-PARAMS = (
-    ParamSpec("mode", "lockstep", "lockstep (deterministic, fast) or realtime (wall clock x rate_factor)",
-              choices=("lockstep", "realtime")),
-    ParamSpec("rate_factor", 1.0, "realtime mode: simulated seconds per wall second", 0.01, 100.0,
-              unit="sim s/wall s", runtime=True),
-    ParamSpec("seed", 0, "seed of turbulence and measurement noise", 0, 2**31 - 1),
-    ParamSpec("duration", 0.0, "simulated time after which the node exits (0: run until stopped)", 0.0, 1e7,
-              unit="s", runtime=True),
-    ParamSpec("dt", 0.02, "sample time", 0.001, 0.1, unit="s"),
-    ParamSpec("substeps", 1, "RK4 steps per sample", 1, 100, unit="steps"),
-    ParamSpec("dead_time", 0.25, "steering dead time (rounded to whole samples)", 0.0, 5.0, unit="s"),
-    ParamSpec("rate_limit", 5.0, "steering rate limit (normalized delta per second)", 0.01, 1000.0, unit="1/s"),
-    ParamSpec("r", _P.r, "tether length", 1.0, 5000.0, unit="m"),
-    ParamSpec("area", _P.area, "kite area", 0.1, 5000.0, unit="m^2"),
-    ParamSpec("rho", _P.rho, "air density", 0.1, 2.0, unit="kg/m^3"),
-    ParamSpec("E", _P.E, "glide ratio of the real kite (> c_E)", 0.5, 30.0, unit="dimensionless"),
-    ParamSpec("c_E", _P.c_E, "glide loss when steering: E - c_E delta^2 (< E)", 0.0, 30.0, unit="dimensionless"),
-    ParamSpec("g_s", _P.g_s, "turning constant", 0.001, 1.0, unit="rad/m"),
-    ParamSpec("w_ref", _P.w_ref, "mean wind at z_ref", 0.5, 40.0, unit="m/s"),
-    ParamSpec("z_ref", _P.z_ref, "reference height of the wind profile", 0.5, 200.0, unit="m"),
-    ParamSpec("shear", _P.shear, "wind shear exponent: w = w_ref (z/z_ref)^shear", 0.0, 1.0, unit="dimensionless"),
-    ParamSpec("turbulence", True, "turbulence on the reference wind"),
-    ParamSpec("turbulence_intensity", 0.14, "gust standard deviation / mean wind", 0.0, 1.0, unit="dimensionless"),
-    ParamSpec("turbulence_length", 100.0, "turbulence length scale L_W (tau = L_W / w_ref)", 1.0, 10000.0, unit="m"),
-    ParamSpec("anemometer_noise", 0.1, "anemometer white-noise standard deviation", 0.0, 10.0, unit="m/s"),
-    ParamSpec("noise_angle_deg", 0.1, "angle measurement noise standard deviation", 0.0, 10.0, unit="deg"),
-    ParamSpec("noise_rate", 0.005, "angular-rate measurement noise standard deviation", 0.0, 1.0, unit="rad/s"),
-    ParamSpec("noise_tension", 0.01, "relative tension noise standard deviation (0.01 = 1 %)", 0.0, 1.0,
-              unit="dimensionless"),
-    ParamSpec("launch_theta_deg", 30.0, "theta after launch and after a crash (phi = psi = 0)", 1.0, 89.0,
-              unit="deg"),
-    ParamSpec("command_timeout", 1.0, "wall time without steering before flying neutral", 0.01, 60.0,
-              unit="s (wall)", runtime=True),
-    ParamSpec("wait_subscribers", 1, "lockstep: subscribers of /kite/state to wait for before the first step", 0,
-              100, unit="subscribers", runtime=True),
-    ParamSpec("resend_period", 0.2, "lockstep: wall time before an unanswered sample is re-published", 0.005, 10.0,
-              unit="s (wall)", runtime=True),
-)
-
-
-def config_from_params(v: dict) -> PlantConfig:
-    """Build the plant configuration from checked parameter values (raises ParameterError)."""
-    params = KiteParams(**{k: v[k] for k in ("r", "area", "rho", "E", "c_E", "g_s", "w_ref", "z_ref", "shear")})
-    turb = replace(TurbulenceSettings(), enabled=v["turbulence"], intensity=v["turbulence_intensity"],
-                   length_scale=v["turbulence_length"], anemometer_noise=v["anemometer_noise"])
-    noise = NoiseSettings(math.radians(v["noise_angle_deg"]), v["noise_rate"], v["noise_tension"])
-    return PlantConfig(params=params, dt=v["dt"], substeps=v["substeps"], dead_time=v["dead_time"],
-                       rate_limit=v["rate_limit"], turbulence=turb, noise=noise,
-                       launch_state=(math.radians(v["launch_theta_deg"]), 0.0, 0.0))
-
-
-def _state_msg(stamp, v) -> JointState:
-    s = JointState(name=["theta", "phi", "psi"], position=v[:3], velocity=v[3:])
+def _state_msg(stamp, position, velocity) -> JointState:
+    s = JointState(name=["theta", "phi", "psi"], position=position, velocity=velocity)
     s.header.stamp = stamp
     s.header.frame_id = "anchor"
     return s
@@ -99,24 +45,20 @@ def _position_msg(stamp, v) -> PointStamped:
     return p
 
 
-def _tension_msg(stamp, v) -> WrenchStamped:
+def _tension_msg(stamp, tension: float) -> WrenchStamped:
     w = WrenchStamped()
     w.header.stamp = stamp
     w.header.frame_id = "tether"
-    w.wrench.force.x = v[0]
+    w.wrench.force.x = tension
     return w
 
 
-def _wind_msg(stamp, v) -> Vector3Stamped:
+def _wind_msg(stamp, wind: float) -> Vector3Stamped:
     w = Vector3Stamped()
     w.header.stamp = stamp
     w.header.frame_id = "anchor"
-    w.vector.x = v[0]
+    w.vector.x = wind
     return w
-
-
-def _clock_msg(stamp, v) -> ClockMsg:
-    return ClockMsg(clock=stamp)
 
 
 class PlantNode(Node):
@@ -136,13 +78,7 @@ class PlantNode(Node):
         self.pub_wind = self.create_publisher(Vector3Stamped, WIND, MEASUREMENTS)
         self.pub_crashes = self.create_publisher(UInt32, CRASHES, LATCHED)
         self.pub_crashes.publish(UInt32(data=0))
-        self.create_subscription(JointState, STEERING, self.steering_callback, RELIABLE_10, raw=True)
-        # The sample's messages (see the builders above), serialized fast when the RMW allows it.
-        self._msg_clock = MessageTemplate(_clock_msg, 0)
-        self._msg_state = MessageTemplate(_state_msg, 6)
-        self._msg_position = MessageTemplate(_position_msg, 3)
-        self._msg_tension = MessageTemplate(_tension_msg, 1)
-        self._msg_wind = MessageTemplate(_wind_msg, 1)
+        self.create_subscription(JointState, STEERING, self.steering_callback, RELIABLE_10)
         self._finished = False
         self._first_answer = None          # (wall time, step) of the first accepted command: throughput log
         self._delta = 0.0                 # last valid command (realtime zero-order hold)
@@ -177,18 +113,11 @@ class PlantNode(Node):
             self._timer.timer_period_ns = period_ns
 
     # -------------------------------------------------------------- callbacks
-    def steering_callback(self, msg) -> None:
-        """A steering command: raw bytes from the node's own subscription, or a JointState."""
+    def steering_callback(self, msg: JointState) -> None:
+        """A steering command: ``delta`` stamped with the sample it answers."""
         if self._finished:
             return
-        try:
-            if isinstance(msg, JointState):
-                stamp, position = stamp_to_ns(msg.header.stamp), msg.position
-            else:
-                stamp, position = joint_state_from_raw(msg)
-        except ValueError as exc:
-            self._reject("steering", f"rejected steering: {exc}")
-            return
+        stamp, position = stamp_to_ns(msg.header.stamp), msg.position
         values = finite_floats(position, 1)
         if values is None or abs(values[0]) > 1.0:
             self._reject("steering", f"rejected steering {list(position)!r}: expected one finite delta in [-1, 1]")
@@ -288,13 +217,13 @@ class PlantNode(Node):
     def publish_sample(self) -> None:
         """Publish /clock and every measurement of the current sample, all stamped with its sim time."""
         m = self.plant.measure()
-        ns = self.plant.k * self._dt_ns
-        self.pub_clock.publish(self._msg_clock(ns, ()))
-        self.pub_tension.publish(self._msg_tension(ns, (m.tension,)))
-        self.pub_position.publish(self._msg_position(ns, m.position))
-        self.pub_wind.publish(self._msg_wind(ns, (m.wind_ref,)))
+        stamp = ns_to_stamp(self.plant.k * self._dt_ns)
+        self.pub_clock.publish(ClockMsg(clock=stamp))
+        self.pub_tension.publish(_tension_msg(stamp, m.tension))
+        self.pub_position.publish(_position_msg(stamp, m.position))
+        self.pub_wind.publish(_wind_msg(stamp, m.wind_ref))
         # last: in lockstep its arrival means the sample is complete
-        self.pub_state.publish(self._msg_state(ns, (m.theta, m.phi, m.psi, m.theta_dot, m.phi_dot, m.psi_dot)))
+        self.pub_state.publish(_state_msg(stamp, [m.theta, m.phi, m.psi], [m.theta_dot, m.phi_dot, m.psi_dot]))
         self._last_publish = time.monotonic()
         if not self._sample0_to_all and self.pub_state.get_subscription_count() >= self.p["wait_subscribers"]:
             self._sample0_to_all = True

@@ -1,4 +1,9 @@
 """Topic names of the kite_rto graph (SPEC §7)."""
+from ..flight.steering_loop import SYNC_NAMES
+
+__all__ = ["CLOCK", "STATE", "POSITION", "TENSION", "WIND", "STEERING", "SETPOINTS", "STATUS", "SYNC", "SYNC_NAMES",
+           "REFERENCE_PATH", "LAPS", "CRASHES"]
+
 CLOCK = "/clock"
 STATE = "/kite/state"
 POSITION = "/kite/position"
@@ -8,8 +13,6 @@ STEERING = "/kite/steering"
 SETPOINTS = "/rto/setpoints"
 STATUS = "/rto/status"
 SYNC = "/rto/sync"
-SYNC_NAMES = ["theta_0", "A_phi", "A_theta", "updates"]
-"""Names of the /rto/sync JointState: the setpoints in force (rad), then the count of setpoint messages."""
 REFERENCE_PATH = "/kite/reference_path"
 LAPS = "/kite/laps"
 CRASHES = "/kite/crashes"

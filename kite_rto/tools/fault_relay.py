@@ -32,7 +32,8 @@ from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
-from ..nodes.common import LATCHED, RELIABLE_10, run_node, stamp_to_ns
+from ..nodes.interface import LATCHED, RELIABLE_10, stamp_to_ns
+from ..nodes.spin import run_node
 from ..nodes.topics import CRASHES, STATE
 
 __all__ = ["main", "parse_args", "message_type"]

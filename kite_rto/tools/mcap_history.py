@@ -8,11 +8,12 @@ from types import SimpleNamespace
 import numpy as np
 from mcap.reader import make_reader
 from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import JointState
 
 from ..flight.path import Setpoints
 from ..flight.shape import shape_from_setpoints
 from ..nodes import topics as T
-from ..nodes.common import joint_state_from_raw, stamp_to_ns
+from ..nodes.interface import stamp_to_ns
 from .record import TOPICS
 
 __all__ = ["read_mcap", "history_from_mcap"]
@@ -38,7 +39,8 @@ def read_mcap(path) -> SimpleNamespace:
         for _schema, channel, message in reader.iter_messages(topics=wanted, log_time_order=True):
             topic = channel.topic
             if topic == T.STATE:
-                ns, pos = joint_state_from_raw(message.data)
+                state = deserialize_message(message.data, JointState)
+                ns, pos = stamp_to_ns(state.header.stamp), state.position
                 if not t or ns * 1e-9 > t[-1]:
                     t.append(ns * 1e-9)
                     theta.append(pos[0])

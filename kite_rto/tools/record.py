@@ -38,7 +38,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
 from ..nodes import topics as T
-from ..nodes.common import LATCHED, MEASUREMENTS, RELIABLE_10, request_exit, run_node
+from ..nodes.interface import LATCHED, MEASUREMENTS, RELIABLE_10
+from ..nodes.spin import request_exit, run_node
 
 __all__ = ["TOPICS", "topic_type", "type_name", "message_definition", "generated_definition", "qos_yaml",
            "McapRecording", "RecordNode", "main"]

@@ -7,7 +7,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from ..nodes.common import LATCHED, RELIABLE_10, stamp_to_ns
+from ..nodes.interface import LATCHED, RELIABLE_10, stamp_to_ns
 from ..nodes.topics import LAPS, SETPOINTS, STATE, STATUS
 
 __all__ = ["Recorder"]

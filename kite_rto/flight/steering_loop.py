@@ -1,0 +1,360 @@
+"""The controller node's per-sample logic without ROS: join, timeline, plant restart, optimizer synchronization.
+
+:class:`SteeringLoop` takes the plant's readings (stamps in integer ns), setpoint and ``/rto/sync`` messages as
+plain values and answers each /kite/state sample through ``answer(stamp_ns, delta)``. Wall time comes from
+``clock``, the graph from publisher counts, so tests drive it deterministically.
+
+Join: a /kite/state sample is answered once the anemometer reading of its stamp is in (DDS does not order across
+topics); if that reading is lost, the next sample releases the waiting one with the previous reading. Timeline:
+the :class:`~.sample_join.Timeline` rule shared with :class:`~.sample_join.SampleJoin`. A restart candidate is
+answered by a fresh controller, kept if the restart is confirmed; the flying controller never sees it. Bad
+readings, or readings stamped far from the last sample, are rejected with throttled warnings.
+
+Synchronization (``sync=True``): sample k is answered once the optimizer's sync message for it is in (the
+setpoints in force, applied first when its count of setpoint messages changed: the pure runner's order), or
+unsynchronized after ``sync_timeout`` (:data:`SYNC_ABSENT` s without an optimizer in the graph), then at once
+until a sync message arrives again.
+"""
+from __future__ import annotations
+
+import math
+import time
+from types import SimpleNamespace
+
+from ..kite.model import shared_model
+from .controller import PathController
+from .laps import LapDetector
+from .path import Setpoints, SetpointError
+from .sample_join import Place, RejectLog, Timeline, reading_error, state_values
+
+__all__ = ["SteeringLoop", "fmt_setpoints", "SYNC_ABSENT", "SETPOINTS_GRACE", "SETPOINTS_WAIT", "SYNC_NAMES"]
+
+SYNC_ABSENT = 1.0
+"""Wall s a sample waits for /rto/sync before the controller asks whether an optimizer is in the graph at all."""
+SETPOINTS_GRACE, SETPOINTS_WAIT = 1.0, 3.0
+"""Wall s after start-up during which the controller waits for /rto/setpoints before steering (see
+:meth:`SteeringLoop._await_setpoints`): always for the first, while an optimizer is known for the second."""
+SYNC_NAMES = ["theta_0", "A_phi", "A_theta", "updates"]
+"""Names of a /rto/sync message: the setpoints in force (rad) and the optimizer's setpoint-message count."""
+_KEEP = 64
+"""Anemometer readings and sync entries kept ahead of their samples."""
+
+
+def _keep(entries: dict, stamp: int, value) -> None:
+    """Store ``value`` at ``stamp``, forgetting the oldest entry when :data:`_KEEP` are held."""
+    if len(entries) >= _KEEP:
+        del entries[next(iter(entries))]
+    entries[stamp] = value
+
+
+def _measurement(stamp: int, pos, vel, wind: float) -> SimpleNamespace:
+    """What :meth:`PathController.command` reads: time s, angles rad, rates rad/s, reference wind m/s."""
+    return SimpleNamespace(t=stamp * 1e-9, theta=pos[0], phi=pos[1], psi=pos[2], theta_dot=vel[0], phi_dot=vel[1],
+                           psi_dot=vel[2], wind_ref=wind)
+
+
+def fmt_setpoints(c: Setpoints) -> str:
+    """Setpoints in degrees, as the controller logs them."""
+    return "theta_0 {:.1f} deg, A_phi {:.1f} deg, A_theta {:.1f} deg".format(*c.degrees())
+
+
+class SteeringLoop:
+    """Answers plant samples with steering commands; follows setpoints and, optionally, the optimizer's sync.
+
+    ``answer(stamp_ns, delta)`` sends a command, ``lap(stamp_ns, lap)`` a finished lap, ``path()`` is
+    called when the flown setpoints change; ``logger`` has ``info``/``warning`` (extra keyword arguments such as
+    ``throttle_duration_sec`` are passed on). Raises :class:`SetpointError` for initial setpoints ``c0`` outside
+    ``settings.box``.
+    """
+
+    def __init__(self, params, settings, c0: Setpoints, *, answer, lap, path, logger, sync: bool = False,
+                 sync_timeout: float = 10.0, setpoint_sources=lambda: 0, sync_sources=lambda: 0,
+                 clock=time.monotonic):
+        self.params, self.settings = params, settings
+        self.controller = PathController(shared_model(), params, c0, settings)
+        self.laps = LapDetector()
+        self._answer, self._lap, self._path, self.log = answer, lap, path, logger
+        self._setpoint_sources, self._sync_sources, self._clock = setpoint_sources, sync_sources, clock
+        self.reject = RejectLog(logger, clock=clock)
+        self.timeline = Timeline()
+        self._wind, self._tension, self._altitude = params.w_ref, math.nan, math.nan
+        self._last_delta = 0.0
+        self._winds = {}                  # anemometer readings by stamp (ns), until their sample is answered
+        self._pending = None              # (stamp, position, velocity) waiting for its wind reading
+        self._jump = None                 # the same for a stale or future sample (plant restart or junk)
+        self._restart = None              # (fresh controller, its answer) for a restart candidate
+        self._setpoints_in = False        # accepted setpoints yet (see _await_setpoints)
+        self._t_up = clock()
+        self._setpoints_msg = None        # last valid setpoints (rad); applied at once unless synchronized
+        self.sync, self.sync_timeout = sync, sync_timeout
+        self._syncs = {}                  # sync entries by stamp (ns): (setpoints rad, updates)
+        self._sync_held = None            # (stamp, measurement, position, wall time): waits for its sync
+        self._sync_lost = False           # timed out: answer at once until a sync message arrives again
+        self._sync_updates = None         # `updates` of the last applied sync
+
+    # -------------------------------------------------------------- measurements
+    def wind_reading(self, stamp: int, v: float) -> None:
+        """An anemometer reading (m/s): releases the state sample of its stamp if that one waits for it."""
+        if self._bad("wind", v):
+            return
+        _keep(self._winds, stamp, v)
+        for held in (self._pending, self._jump):
+            if held is not None and held[0] == stamp:
+                self._process(held)
+                return
+
+    def tension_reading(self, stamp: int, v: float) -> None:
+        """A line tension (N), for the lap statistics."""
+        if not self._bad("tension", v) and self._stamp_near("tension", stamp):
+            self._tension = v
+
+    def position_reading(self, stamp: int, p) -> None:
+        """``p``: (x, y, z) in m; the altitude z feeds the lap statistics."""
+        if not self._bad("position", p) and self._stamp_near("position", stamp):
+            self._altitude = p[2]
+
+    def _bad(self, part: str, value) -> bool:
+        why = reading_error(part, value)
+        if why is not None:
+            self.reject(part, why)
+        return why is not None
+
+    def _stamp_near(self, what: str, stamp: int) -> bool:
+        if self.timeline.near(stamp):
+            return True
+        self.reject(f"{what} stamp", f"rejected {what} message stamped {stamp * 1e-9:.3f} s at sim time "
+                                     f"{self.timeline.last * 1e-9:.3f} s: stale or future")
+        return False
+
+    def state_sample(self, stamp: int, names, position, velocity) -> None:
+        """A /kite/state sample (names, positions rad, velocities rad/s): answered now or once its parts are in."""
+        try:
+            pos, vel = state_values(names, position, velocity)
+        except ValueError as err:
+            self.reject("state", f"rejected state message: {err}")
+            return
+        if not self._setpoints_in and self._await_setpoints():
+            return
+        if self._sync_held is not None:
+            held = self._sync_held[0]
+            if stamp == held:
+                return                              # re-published while the optimizer works on it
+            if held < stamp <= held + self.timeline.max_gap_ns:
+                self._release_unsynced("the next sample arrived first")
+        held = (stamp, pos, vel)
+        last = self.timeline.last
+        if self._jump is not None:
+            self._reject_jump()
+        if stamp != last and not self.timeline.on(stamp):
+            if stamp in self._winds:
+                self._process(held)                 # complete: the plant restarted or samples were lost
+            else:
+                self._jump = held                   # wait for its anemometer reading
+            return
+        if self._pending is not None and self._pending[0] < stamp:
+            self._process(self._pending)            # its anemometer reading was lost
+        if stamp == last or stamp in self._winds:
+            self._process(held)
+        else:
+            self._pending = held
+
+    def _await_setpoints(self) -> bool:
+        """True (do not steer yet) while the optimizer's setpoints may still be on their way.
+
+        A controller started into a running loop (e.g. restarted after a crash) would otherwise steer the kite
+        towards its initial setpoints until the latched setpoints arrive. It waits while a setpoint publisher is
+        known, or for the first SETPOINTS_GRACE s after start-up (discovery), at most SETPOINTS_WAIT s; without
+        an optimizer it then flies its initial setpoints.
+        """
+        age = self._clock() - self._t_up
+        if age < SETPOINTS_WAIT and (age < SETPOINTS_GRACE or self._setpoint_sources() > 0):
+            self.log.info("waiting for the setpoints on /rto/setpoints before steering", throttle_duration_sec=2.0)
+            return True
+        if self._setpoint_sources() > 0:
+            self.log.warning(f"no valid setpoints on /rto/setpoints within {SETPOINTS_WAIT:g} s: flying "
+                             f"{fmt_setpoints(self.controller.setpoints)}")
+        self._setpoints_in = True                       # stop waiting (and asking the graph)
+        return False
+
+    def _reject_jump(self) -> None:
+        stamp = self._jump[0]
+        self._jump = None
+        self.reject("state stamp", f"rejected state message stamped {stamp * 1e-9:.3f} s at sim time "
+                                   f"{self.timeline.last * 1e-9:.3f} s: stale or future, and no anemometer reading "
+                                   "with that stamp (not a plant restart)")
+
+    def _process(self, held) -> None:
+        if held is self._pending:
+            self._pending = None
+        elif held is self._jump:
+            self._jump = None
+        stamp, pos, vel = held
+        if stamp == self.timeline.last:
+            self._answer(stamp, self._last_delta)       # re-published sample: same answer
+            return
+        wind = self._winds.pop(stamp, None)
+        if not self._place(stamp, pos, vel, wind):
+            return
+        if wind is not None:
+            self._wind = wind
+        if self._winds:
+            self._drop_winds(stamp)
+        m = _measurement(stamp, pos, vel, self._wind)
+        if self.sync and self._wait_for_sync(stamp):
+            self._sync_held = (stamp, m, pos, self._clock())
+            return
+        self._steer(stamp, m, pos)
+
+    def _steer(self, stamp: int, m, pos) -> None:
+        """Answer the sample ``m`` (stamp in ns) with a steering command and update the lap statistics."""
+        delta = self.controller.command(m)
+        self.timeline.last, self._last_delta = stamp, delta
+        self._answer(stamp, delta)
+        lap = self.laps.update(m.t, pos[0], pos[1], self._tension, self._altitude,
+                               self.controller.status.cross_track, m.wind_ref)
+        if lap is not None:
+            self._lap(stamp, lap)
+
+    def _place(self, stamp: int, pos, vel, wind) -> bool:
+        """Place a complete sample on the timeline: True to fly on with it (see the module docstring)."""
+        last = self.timeline.last
+        place, dropped, confirmed = self.timeline.place(stamp)
+        if dropped is not None:
+            self.reject("state stamp", f"rejected state sample stamped {dropped * 1e-9:.3f} s at sim time "
+                                       f"{last * 1e-9:.3f} s: stale or future, and the timeline went on "
+                                       "(not a plant restart)")
+        if place is Place.NEXT:
+            self._restart = None
+            return True
+        if place in (Place.RESTART, Place.JUMP):
+            back = place is Place.RESTART
+            self.log.warning(f"sim time jumped {'back' if back else 'forward'} ({last * 1e-9:.2f} s -> "
+                             f"{confirmed * 1e-9:.2f} s): " + ("plant restarted, re-synchronizing" if back
+                                                              else "samples were lost"))
+            if back:
+                self.controller = self._restart[0]
+                self.laps.reset()
+            self._restart = self._pending = None
+            return True
+        if place is Place.REPEATED:                     # the candidate re-published: the same answer
+            if self._restart is not None:
+                self._answer(stamp, self._restart[1])
+            return False
+        self._restart = None
+        if stamp < last:
+            fresh = PathController(shared_model(), self.params, self.controller.setpoints, self.settings)
+            delta = fresh.command(_measurement(stamp, pos, vel, self._wind if wind is None else wind))
+            self._restart = (fresh, delta)
+            self._answer(stamp, delta)
+        return False
+
+    def _drop_winds(self, stamp: int) -> None:
+        """Forget readings older than the answered sample; reject those far from it (stale or future junk)."""
+        winds, gap = self._winds, self.timeline.max_gap_ns
+        for s in list(winds):
+            if s < stamp or s > stamp + gap:
+                v = winds.pop(s)
+                if abs(s - stamp) > gap:
+                    self.reject("wind stamp", f"rejected wind message {v!r} stamped {s * 1e-9:.3f} s at sim "
+                                              f"time {stamp * 1e-9:.3f} s: stale or future (no state sample has "
+                                              "that stamp)")
+
+    # ----------------------------------------------------------------- setpoints
+    def setpoints_message(self, names, values) -> None:
+        """New setpoints (``names`` theta_0, A_phi, A_theta in any order, ``values`` rad)."""
+        names = list(names)
+        if sorted(names) != sorted(Setpoints.names()) or len(values) != 3:
+            self.reject("setpoints", f"rejected setpoints message {(names, list(values))!r}: expected names "
+                                     "theta_0, A_phi, A_theta with 3 values (rad)")
+            return
+        by_name = dict(zip(names, values))
+        c = [by_name[n] for n in Setpoints.names()]
+        if self.synchronized():                # applied with the sample the optimizer decided them at
+            if not self._setpoints_in:
+                self.log.info(f"new setpoints {fmt_setpoints(Setpoints.from_array(c))} received; synchronized "
+                              "with the optimizer: setpoints apply at the sample of its /rto/sync")
+        elif not self._apply_setpoints(c):
+            return
+        self._setpoints_msg = c
+        self._setpoints_in = True
+
+    def _apply_setpoints(self, c) -> bool:
+        """Fly the setpoints ``c`` (rad): at once before the first sample, else blended; False if refused."""
+        try:
+            if self.timeline.last is None:      # nothing flown yet: start on the new path, no blend
+                self.controller = PathController(shared_model(), self.params, c, self.settings)
+                accepted = self.controller.setpoints
+            else:
+                accepted = self.controller.set_setpoints(c)
+        except SetpointError as err:
+            self.reject("setpoints value", f"rejected setpoints: {err}; keeping "
+                                           f"{fmt_setpoints(self.controller.setpoints)}")
+            return False
+        self.laps.reset()
+        self.log.info(f"new setpoints {fmt_setpoints(accepted)}")
+        self._path()
+        return True
+
+    # ------------------------------------------------------- optimizer synchronization
+    def synchronized(self) -> bool:
+        """True while samples wait for the optimizer's sync message."""
+        return self.sync and not self._sync_lost
+
+    def _wait_for_sync(self, stamp: int) -> bool:
+        """True to hold the sample stamped ``stamp`` for its sync; applies the sync message if it is in."""
+        entry = self._syncs.pop(stamp, None)
+        if self._syncs:
+            for s in [s for s in self._syncs if s < stamp]:
+                del self._syncs[s]
+        if entry is not None:
+            self._apply_sync(*entry)
+            return False
+        return not self._sync_lost
+
+    def _apply_sync(self, c, updates: float) -> None:
+        if updates != self._sync_updates or c != self.controller.setpoints.as_array().tolist():
+            self._sync_updates = updates
+            self._apply_setpoints(c)
+
+    def sync_message(self, stamp: int, names, values) -> None:
+        """The optimizer has processed the sample ``stamp``: ``values`` are :data:`SYNC_NAMES`."""
+        vals = [float(x) for x in values]
+        if list(names) != SYNC_NAMES or len(vals) != 4 or not all(map(math.isfinite, vals)):
+            self.reject("sync", f"rejected sync message {(list(names), vals)!r}: expected names {SYNC_NAMES} "
+                                "with 4 finite values")
+            return
+        if not self._stamp_near("sync", stamp):
+            return
+        if self._sync_lost:
+            self._sync_lost = False
+            self.log.info("/rto/sync is back: answering each sample after the optimizer again")
+        held = self._sync_held
+        if held is not None and held[0] == stamp:
+            self._sync_held = None
+            self._apply_sync(vals[:3], vals[3])
+            self._steer(*held[:3])
+        elif self.timeline.last is None or stamp > self.timeline.last:
+            _keep(self._syncs, stamp, (vals[:3], vals[3]))
+
+    def watchdog(self) -> None:
+        """Call periodically (the node: every 0.05 s): releases a sample that waited too long for its sync."""
+        held = self._sync_held
+        if held is None:
+            return
+        waited = self._clock() - held[3]
+        if waited > self.sync_timeout:
+            self._release_unsynced(f"no /rto/sync within sync_timeout = {self.sync_timeout:g} s")
+        elif waited > SYNC_ABSENT and not (self._sync_sources() > 0 or self._setpoint_sources() > 0):
+            self._release_unsynced(f"no optimizer in the graph after {SYNC_ABSENT:g} s")
+
+    def _release_unsynced(self, why: str) -> None:
+        """Answer the held sample with the latest setpoints; answer at once until a sync message is back."""
+        stamp, m, pos, _ = self._sync_held
+        self._sync_held = None
+        self._sync_lost = True
+        self.log.warning(f"sample at {stamp * 1e-9:.2f} s: {why}; steering unsynchronized until the "
+                         "optimizer's /rto/sync is back")
+        c = self._setpoints_msg
+        if c is not None and c != self.controller.setpoints.as_array().tolist():
+            self._apply_setpoints(c)
+        self._steer(stamp, m, pos)

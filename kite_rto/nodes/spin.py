@@ -1,0 +1,101 @@
+"""Running a node: :func:`run_node` (init, build, spin with the events executor or rclpy's default, shut down,
+exit code) and :func:`request_exit` (end the process from a callback).
+"""
+from __future__ import annotations
+
+import os
+import sys
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+
+from ..kite.params import ParameterError
+
+__all__ = ["EXECUTOR_ENV", "run_node", "request_exit"]
+
+EXECUTOR_ENV = "KITE_RTO_EXECUTOR"
+"""Environment variable: ``single`` forces rclpy's SingleThreadedExecutor where :func:`run_node` would use the
+events executor (``events``, the default for nodes that opt in)."""
+
+
+def request_exit(node, code: int = 0) -> None:
+    """Make the node's process exit with ``code`` once the current callback returns.
+
+    Under :func:`run_node`'s events executor loop this only sets a flag (an exception escaping a callback would be
+    logged as FATAL by the C++ executor); under ``rclpy.spin(node)`` or any other executor it raises
+    :class:`SystemExit`, which propagates out of the spin call as before. Callbacks should return right after it.
+    """
+    if getattr(node, "_kite_run_loop", False):
+        node._kite_exit_code = code
+        return
+    raise SystemExit(code)
+
+
+def _events_executor(context):
+    """rclpy's C++ events executor (Jazzy: ``rclpy.experimental``), or None when unavailable or disabled."""
+    if os.environ.get(EXECUTOR_ENV, "events").strip().lower() in ("single", "singlethreaded", "default"):
+        return None
+    try:
+        from rclpy.experimental import EventsExecutor
+    except ImportError:
+        return None
+    return EventsExecutor(context=context)
+
+
+def _spin_events(node, executor) -> int:
+    # The Jazzy backport's ``EventsExecutor.spin()`` holds the GIL while it waits and did not dispatch timers on
+    # these machines (signals and other threads starve); ``spin_once`` with a timeout works: the GIL is released
+    # while waiting, timers (also STEADY_TIME ones) fire, Ctrl-C raises KeyboardInterrupt here.
+    node._kite_run_loop = True
+    node._kite_exit_code = None
+    executor.add_node(node)
+    ok = node.context.ok
+    spin_once = executor.spin_once
+    try:
+        while ok():
+            spin_once(timeout_sec=0.25)
+            if node._kite_exit_code is not None:
+                return node._kite_exit_code
+        return 0
+    finally:
+        try:
+            executor.remove_node(node)
+        except Exception:  # noqa: BLE001 - best effort at shutdown
+            pass
+
+
+def run_node(factory, args=None, *, events: bool = False) -> int:
+    """Init rclpy, build the node with ``factory()``, spin, shut down; return the process exit code.
+
+    A :class:`ParameterError` at construction is reported on stderr and gives exit code 2. With ``events=True``
+    the node is spun by rclpy's C++ events executor (several times less overhead per callback than the
+    SingleThreadedExecutor; no coroutine callbacks), unless ``KITE_RTO_EXECUTOR=single`` is set or it is not
+    available; the node should then end with :func:`request_exit` rather than raising ``SystemExit``.
+    """
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = factory()
+        executor = _events_executor(node.context) if events else None
+        if executor is not None:
+            code = _spin_events(node, executor)
+        else:
+            rclpy.spin(node)
+    except ParameterError as exc:
+        print(f"[kite_rto] refusing to start: {exc}", file=sys.stderr, flush=True)
+        code = 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except RuntimeError:
+        if rclpy.ok():
+            raise
+        # Ctrl-C shut rclpy down while a call into it was in flight: rclpy's C++ layer then raises a RuntimeError
+        # (pybind11 "Unable to convert call argument ...") instead of ExternalShutdownException. A clean stop.
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else 0
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
