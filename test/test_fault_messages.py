@@ -24,7 +24,7 @@ from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints
 from kite_rto.flight.shape import setpoints_from_shape
 from kite_rto.kite.plant import PlantConfig
 from kite_rto.gma import HistoryStore
-from kite_rto.nodes.interface import LATCHED, RELIABLE_10, ns_to_stamp, stamp_to_ns
+from kite_rto.nodes.interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
 
 from faultgraph import QUIET, SHORT, Watch, node, steering_recorder, stop_all
 from faultlog import fault_row
@@ -62,7 +62,7 @@ def test_bad_steering_never_unblocks_lockstep(probe, ros_env, request, tmp_path)
                    "probe answers each sample first with a bad /kite/steering stamped with that sample (NaN, +-Inf, "
                    "1.5, -7, 0 or 2 values) or with a stamp 1 s ahead / 1 s behind, then with a good one") as row:
         states = []
-        steer = probe.node.create_publisher(JointState, "/kite/steering", RELIABLE_10)
+        steer = probe.node.create_publisher(JointState, "/kite/steering", MEASUREMENTS)
         probe.node.create_subscription(JointState, "/kite/state", states.append,
                                        QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
         plant = node("plant", "plant", ros_env, tmp_path, {"command_timeout": 30.0, "resend_period": 0.05})
@@ -117,7 +117,7 @@ def test_bad_steering_realtime_is_not_a_command(probe, ros_env, request, tmp_pat
                    "(NaN, 2.0, 2 values, stamps 2 s behind and 2 s ahead), then good ones again") as row:
         clock = []
         states = []
-        steer = probe.node.create_publisher(JointState, "/kite/steering", RELIABLE_10)
+        steer = probe.node.create_publisher(JointState, "/kite/steering", MEASUREMENTS)
         probe.node.create_subscription(JointState, "/kite/state", states.append, RELIABLE_10)
         plant = node("plant", "plant", ros_env, tmp_path, {"mode": "realtime", "command_timeout": 0.5})
         try:
@@ -354,7 +354,7 @@ def test_bad_optimizer_inputs_keep_the_experiments_clean(probe, ros_env, request
     ok = {"state": [0.6, 0.0, 0.0]}
     probe.node.create_subscription(JointState, "/kite/state", lambda m: ok.update(state=list(m.position)),
                                    RELIABLE_10)
-    pubs = {t: probe.node.create_publisher(TYPES[t], t, RELIABLE_10) for t in cases}
+    pubs = {t: probe.node.create_publisher(TYPES[t], t, MEASUREMENTS) for t in cases}
     procs = []
     with fault_row(request, "bad measurements into the optimizer",
                    "probe publishes the controller's bad-input set on /kite/state, /kite/wind, /kite/tension and "

@@ -29,11 +29,11 @@ def probe():
     p.close()
 
 
-def start_graph(probe, db, ros_env, sync=False, plant=None, n_iter=1, sync_timeout=10.0):
+def start_graph(probe, db, ros_env, sync=False, plant=None, n_iter=1):
     """Optimizer first (it publishes the first setpoints), then controller, then plant (waits for both to subscribe)."""
     opt = start_node("optimizer", {"db": str(db), **SHORT, "n_iter": n_iter}, ros_env)
     assert probe.spin_until(lambda: probe.node.count_publishers("/rto/setpoints") > 0, 120.0)
-    ctrl = start_node("controller", {"sync_optimizer": sync, "sync_timeout": sync_timeout}, ros_env)
+    ctrl = start_node("controller", {"sync_optimizer": sync}, ros_env)
     assert probe.spin_until(lambda: probe.node.count_publishers("/kite/steering") > 0, 60.0)
     plant = start_node("plant", {**(QUIET if plant is None else plant), "wait_subscribers": 2}, ros_env)
     return opt, ctrl, plant
@@ -77,12 +77,12 @@ def test_graph_flies_the_pure_runners_sequence(probe, ros_env, tmp_path, plant_p
     np.testing.assert_array_equal(ros_cost, [e.outcome.cost for e in pure.experiments])
     np.testing.assert_array_equal(ros_next, pure.iterates[1:])
     assert f"done: {n_iter} iterations" in out
-    assert "no /rto/sync within" not in ctrl_out, ctrl_out      # never timed out waiting for the optimizer
+    assert "no optimizer alive" not in ctrl_out, ctrl_out       # never released a sample unsynchronized
 
 
 def test_killed_optimizer_resumes_from_its_database(probe, ros_env, tmp_path):
     db = tmp_path / "rto.sqlite"
-    opt, ctrl, plant = start_graph(probe, db, ros_env, sync=True, sync_timeout=2.0)
+    opt, ctrl, plant = start_graph(probe, db, ros_env, sync=True)
     try:
         def some_done():
             return db.exists() and stored(db)[1]["experiments"] >= 2

@@ -9,7 +9,7 @@ from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from kite_rto.nodes.interface import RELIABLE_10, stamp_to_ns
+from kite_rto.nodes.interface import MEASUREMENTS, RELIABLE_10, stamp_to_ns
 
 from rosutil import Probe, start_node, stop
 
@@ -42,7 +42,7 @@ def test_lockstep_advances_one_step_per_answered_command(probe, ros_env):
     proc = start_node("plant", {"turbulence": False, "resend_period": 0.3, "command_timeout": 30.0}, ros_env)
     states, extra = [], {"tension": [], "position": [], "wind": [], "clock": []}
     n = probe.node
-    steer = n.create_publisher(JointState, "/kite/steering", RELIABLE_10)
+    steer = n.create_publisher(JointState, "/kite/steering", MEASUREMENTS)
     n.create_subscription(JointState, "/kite/state", states.append, RELIABLE_10)
     n.create_subscription(WrenchStamped, "/kite/tension", extra["tension"].append, RELIABLE_10)
     n.create_subscription(PointStamped, "/kite/position", extra["position"].append, RELIABLE_10)
@@ -94,21 +94,29 @@ def test_realtime_mode_keeps_pace(probe, ros_env):
     assert "flying neutral" in out           # nobody steered: it says so
 
 
-def test_neutral_after_timeout_in_lockstep(probe, ros_env):
-    """When the controller stops answering, the lockstep plant advances (neutral) after command_timeout."""
+def test_lockstep_waits_for_a_live_pilot_and_flies_neutral_once_none_is_alive(probe, ros_env):
+    """A silent steering writer whose liveliness holds (a controller waiting for a slow optimizer) holds the lockstep
+    plant however long it takes; once no writer is alive (it left, died or stalled) the plant flies neutral after
+    command_timeout and keeps its clock going."""
     proc = start_node("plant", {"turbulence": False, "command_timeout": 0.1, "duration": 1.0}, ros_env)
     states = []
-    steer = probe.node.create_publisher(JointState, "/kite/steering", RELIABLE_10)
+    steer = probe.node.create_publisher(JointState, "/kite/steering", MEASUREMENTS)
     probe.node.create_subscription(JointState, "/kite/state", states.append, RELIABLE_10)
     try:
         assert probe.spin_until(lambda: states, 30.0)
         cmd = JointState(name=["delta"], position=[0.0])
         cmd.header.stamp = states[0].header.stamp
-        steer.publish(cmd)                          # one answer, then silence
+        steer.publish(cmd)                          # one answer, then silence from a live writer
+        assert probe.spin_until(lambda: any(stamp_to_ns(m.header.stamp) > 0 for m in states), 30.0)
+        probe.spin_until(lambda: proc.poll() is not None, 3.0)      # 30x command_timeout: still waiting
+        assert proc.poll() is None
+        assert max(stamp_to_ns(m.header.stamp) for m in states) == 20_000_000      # one step, then held
+        probe.node.destroy_publisher(steer)         # the pilot leaves: no steering writer alive
         assert probe.spin_until(lambda: proc.poll() is not None, 60.0)
         assert proc.returncode == 0
     finally:
         out = stop(proc)
+    assert "waiting" in out and "its writer is alive" in out
     assert "flying neutral" in out and "duration reached" in out
 
 

@@ -17,6 +17,7 @@ import numpy as np
 from geometry_msgs.msg import PointStamped, PoseStamped, Vector3Stamped, WrenchStamped
 from nav_msgs.msg import Path
 from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
@@ -24,7 +25,7 @@ from ..flight.controller import ControllerSettings, PathController
 from ..flight.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, Setpoints, SetpointError
 from ..flight.steering_loop import SteeringLoop, fmt_setpoints
 from ..kite.params import KiteParams, ParameterError
-from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
+from .interface import ALIVE_10, LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
 from .parameters import ParamSpec, declare_params
 from .spin import run_node
 from .topics import LAPS, POSITION, REFERENCE_PATH, SETPOINTS, STATE, STEERING, SYNC, TENSION, WIND
@@ -56,10 +57,7 @@ PARAMS = (
               0.0, 100.0, unit="1/s^2", runtime=True),
     ParamSpec("sync_optimizer", False, "lockstep: answer each sample only after the optimizer has processed it "
               "(/rto/sync) and take the setpoints from there, so the graph flies exactly the pure runner's sequence; "
-              "without an optimizer publishing /rto/sync it answers at once"),
-    ParamSpec("sync_timeout", 10.0, "wall time to wait for /rto/sync before answering with the current setpoints "
-              "(then unsynchronized until the optimizer is back); longer than a GMA iteration's solve", 0.1, 3600.0,
-              unit="s", runtime=True),
+              "it waits as long as the optimizer is alive, and answers at once when none is"),
     ParamSpec("blend_time", _C.blend_time, "duration of the blend to new setpoints (0: switch at once)", 0.0, 600.0,
               unit="s", runtime=True),
     ParamSpec("E", KiteParams.E, "model glide ratio (nominal)", 0.5, 30.0, unit="dimensionless"),
@@ -110,9 +108,8 @@ class ControllerNode(Node):
         try:
             self.loop = SteeringLoop(params, settings, c0, answer=self.answer, lap=self.publish_lap,
                                      path=self.publish_path, logger=self.get_logger(), sync=v["sync_optimizer"],
-                                     sync_timeout=v["sync_timeout"],
                                      setpoint_sources=lambda: self.count_publishers(SETPOINTS),
-                                     sync_sources=lambda: self.count_publishers(SYNC))
+                                     sync_alive=lambda: self._sync_alive)
         except SetpointError as err:
             raise ParameterError(f"initial setpoints (theta_0_deg, A_phi_deg, A_theta_deg): {err}") from None
         self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10)
@@ -121,7 +118,9 @@ class ControllerNode(Node):
         self.create_subscription(PointStamped, POSITION, self.position_callback, RELIABLE_10)
         self.create_subscription(JointState, SETPOINTS, self.setpoints_callback, LATCHED)
         if self.loop.sync:
-            self.create_subscription(JointState, SYNC, self.sync_callback, MEASUREMENTS)
+            self._sync_alive = 0          # /rto/sync writers whose liveliness holds
+            self.create_subscription(JointState, SYNC, self.sync_callback, ALIVE_10, event_callbacks=(
+                SubscriptionEventCallbacks(liveliness=lambda info: setattr(self, "_sync_alive", info.alive_count))))
             self.create_timer(0.05, self.loop.watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.publish_path()
         self.get_logger().info(f"controller up: setpoints {fmt_setpoints(c0)}")
@@ -141,10 +140,6 @@ class ControllerNode(Node):
 
         Every later PathController (plant restart, first setpoints) is built with the new settings too.
         """
-        if "sync_timeout" in changes:
-            self.loop.sync_timeout = changes.pop("sync_timeout")
-            if not changes:
-                return
         try:
             settings = replace(self.loop.settings, **changes)     # validated (ControllerSettings.__post_init__)
         except ValueError as err:

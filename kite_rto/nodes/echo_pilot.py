@@ -11,7 +11,7 @@ from __future__ import annotations
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from .interface import RELIABLE_10
+from .interface import MEASUREMENTS, RELIABLE_10
 from .parameters import ParamSpec, declare_params
 from .spin import run_node
 from .topics import STATE, STEERING
@@ -35,7 +35,7 @@ class EchoPilot(Node):
     def __init__(self, **kwargs):
         super().__init__("echo_pilot", **kwargs)
         self.delta = declare_params(self, PARAMS, apply=self.apply_params)["delta"]
-        self.pub = self.create_publisher(JointState, STEERING, RELIABLE_10)
+        self.pub = self.create_publisher(JointState, STEERING, MEASUREMENTS)
         self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10)
         self.answered = 0
 

@@ -1,21 +1,75 @@
 """Running a node: :func:`run_node` (init, build, spin with the events executor or rclpy's default, shut down,
 exit code) and :func:`request_exit` (end the process from a callback).
+
+Fault injection for load tests (``scripts/stress.sh``): with ``KITE_RTO_INJECT_DELAY=MAX[:SEED]`` in the
+environment every subscription of the node hands each message to its callback after a random wall delay, uniform in
+[0, MAX] s (per-topic order kept, order across topics shuffled), the way a busy machine or network delivers them.
 """
 from __future__ import annotations
 
+import heapq
+import itertools
 import os
+import random
 import sys
+import time
 
 import rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
 
 from ..kite.params import ParameterError
 
-__all__ = ["EXECUTOR_ENV", "run_node", "request_exit"]
+__all__ = ["EXECUTOR_ENV", "DELAY_ENV", "run_node", "request_exit"]
 
 EXECUTOR_ENV = "KITE_RTO_EXECUTOR"
 """Environment variable: ``single`` forces rclpy's SingleThreadedExecutor where :func:`run_node` would use the
 events executor (``events``, the default for nodes that opt in)."""
+
+
+DELAY_ENV = "KITE_RTO_INJECT_DELAY"
+"""Environment variable ``MAX[:SEED]``: deliver every received message after a random delay in [0, MAX] wall s."""
+
+
+class _DelayedDelivery:
+    """Holds received messages for a random wall delay before their callbacks run (see the module docstring)."""
+
+    def __init__(self, spec: str):
+        max_s, _, seed = spec.partition(":")
+        try:
+            self.max_s = float(max_s)
+            seed = int(seed or 0)
+        except ValueError:
+            raise ParameterError(f"{DELAY_ENV} = {spec!r}: expected MAX[:SEED], e.g. 0.002:1 (max delay in wall "
+                                 "seconds, integer seed)") from None
+        if not 0.0 <= self.max_s <= 1.0:
+            raise ParameterError(f"{DELAY_ENV} = {spec!r}: expected a maximum delay in [0, 1] s")
+        self.rng = random.Random(seed * 1_000_003 + os.getpid())
+        self.queue, self.seq = [], itertools.count()
+        self.created = Node.create_subscription
+
+    def wrap(self, callback):
+        last = [0.0]                                   # per subscription: delivery times never decrease
+
+        def delayed(msg):
+            due = max(time.monotonic() + self.rng.uniform(0.0, self.max_s), last[0])
+            last[0] = due
+            heapq.heappush(self.queue, (due, next(self.seq), callback, msg))
+        return delayed
+
+    def install(self) -> None:
+        wrap, created = self.wrap, self.created
+
+        def create_subscription(node, msg_type, topic, callback, qos_profile, **kwargs):
+            return created(node, msg_type, topic, wrap(callback), qos_profile, **kwargs)
+        Node.create_subscription = create_subscription
+
+    def release(self) -> None:
+        now, queue = time.monotonic(), self.queue
+        while queue and queue[0][0] <= now:
+            _, _, callback, msg = heapq.heappop(queue)
+            callback(msg)
 
 
 def request_exit(node, code: int = 0) -> None:
@@ -76,7 +130,14 @@ def run_node(factory, args=None, *, events: bool = False) -> int:
     node = None
     code = 0
     try:
+        delays = _DelayedDelivery(os.environ[DELAY_ENV]) if os.environ.get(DELAY_ENV) else None
+        if delays is not None:
+            delays.install()
         node = factory()
+        if delays is not None:
+            node.create_timer(0.001, delays.release, clock=Clock(clock_type=ClockType.STEADY_TIME))
+            node.get_logger().warning(f"{DELAY_ENV}: every received message is delivered after a random delay of "
+                                      f"up to {delays.max_s * 1e3:g} ms (load test)")
         executor = _events_executor(node.context) if events else None
         if executor is not None:
             code = _spin_events(node, executor)

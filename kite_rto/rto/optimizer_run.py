@@ -74,6 +74,9 @@ class OptimizerRun:
         self.join.crashes = self._crash_offset + n
 
     def _part(self, stamp: int, part: str, value) -> None:
+        if part == "state" and stamp == self.join.last:
+            self._sync(stamp)        # the plant re-published a processed sample (its answer is late): sync it again
+            return
         m = self.join.add(stamp, part, value)
         if self.join.discarded:
             s, parts = self.join.discarded[-1]
