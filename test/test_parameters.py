@@ -231,6 +231,8 @@ def test_optimizer_runtime_limits_and_cross_checks(rcl, tmp_path):
     assert r.successful and node.p["n_iter"] == 2 and node.p["exit_when_done"] is True
     assert_rejected(node.set_parameters([Parameter("n_iter", value=-1)])[0], "parameter n_iter = -1", "[0, 10000]")
     assert_rejected(node.set_parameters([Parameter("filter_gain", value=0.5)])[0], "filter_gain", READ_ONLY)
+    assert node.wait_until_started(600.0)                  # the NLPs are built off the executor thread
+    assert node.run.n_iter == 2                            # taken from the parameters changed during start-up
     node.run.done, node.run.phase = True, "done"                                        # the run has ended
     assert_rejected(node.set_parameters([Parameter("n_iter", value=5)])[0], "parameter n_iter = 5",
                     "restart the node")

@@ -13,7 +13,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProf
 __all__ = ["RELIABLE_10", "MEASUREMENTS", "LATCHED", "ALIVE_10", "LEASE", "stamp_to_ns", "ns_to_stamp",
            "finite_floats"]
 
-LEASE = 1.0
+LEASE = 5.0
 """Liveliness lease, s. Every per-sample publisher offers it (DDS asserts it from the process's own middleware
 threads, so a busy Python callback does not stop it; a killed, stopped or hung-in-the-kernel process does), and the
 two handshake readers (the plant's /kite/steering, the controller's /rto/sync) request it: in lockstep they wait
@@ -34,7 +34,7 @@ ALIVE_10 = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=Rel
 """Handshake readers (/kite/steering at the plant, /rto/sync at the controller): ``RELIABLE_10`` that requests the
 liveliness lease :data:`LEASE`, so the reader learns within about a lease when its peer dies or stalls. Only writers
 that offer a lease of at most :data:`LEASE` match (``MEASUREMENTS`` does; a default-QoS writer, e.g. a plain
-``ros2 topic pub``, needs ``--qos-liveliness automatic --qos-liveliness-lease-duration 1``)."""
+``ros2 topic pub``, needs ``--qos-liveliness automatic --qos-liveliness-lease-duration 5``)."""
 LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 """Setpoints: a late joiner gets the current value."""

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import math
 import os
+import sys
+import threading
 from dataclasses import replace
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -25,10 +27,11 @@ from std_msgs.msg import UInt32
 
 from ..flight.path import Setpoints, SetpointError, validate_setpoints
 from ..flight.shape import ShapeBox, setpoints_from_shape
-from ..gma import HistoryStore
+from ..gma import GMA, HistoryStore
 from ..kite.params import KiteParams, ParameterError
 from ..rto.optimizer_run import OptimizerRun
-from ..rto.builder import make_gma
+from ..rto.builder import gma_directions, lap_problem, make_gma, model_only_optimum
+from ..rto.ocp import KiteOCPSettings
 from ..rto.session import RTOSession
 from ..rto.settings import KiteRTOSettings
 from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
@@ -129,27 +132,74 @@ class OptimizerNode(Node):
             raise ParameterError(str(err)) from None
         self.store = HistoryStore(v["db"])
         history = self.store.load() if v["resume"] else None
-        try:   # e.g. more privileged directions than setpoints free to move on this box
-            self.gma = make_gma(self.settings, history=history)
-        except ValueError as err:
-            raise ParameterError(f"parameters gradient = {v['gradient']!r}, n_directions = {v['n_directions']}: "
-                                 f"{err}") from None
+        self.run = None                        # the GMA run, once built (see _build)
+        self.starting = "starting"             # what the start-up is doing (``/rto/status`` phase meanwhile)
+        self.pub_status = self.create_publisher(DiagnosticArray, STATUS, RELIABLE_10)
+        self.create_timer(1.0, self.publish_status, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.publish_status()
+        # The NLP builds and the model's optimum and directions take seconds (10-14 s when nothing is cached): they
+        # run on a worker thread, so parameter services and the status answer from the first second.
+        self._built = None
+        self._history = history
+        self._builder = threading.Thread(target=self._build, args=(history,), name="optimizer-build", daemon=True)
+        self._builder.start()
+        self._build_timer = self.create_timer(0.05, self._finish_start,
+                                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def _build(self, history) -> None:
+        """Worker thread: the model's problem, optimum, directions and GMA (disk-cached where possible)."""
+        try:
+            s = self.settings
+            ocp = KiteOCPSettings(h_min=s.experiment.h_min)
+            for what, step in (("building the lap OCP", lambda: lap_problem(s.box, KiteParams(), ocp)),
+                               ("solving for the model's optimum", lambda: model_only_optimum(s.box, KiteParams(), ocp)),
+                               ("computing the privileged directions", lambda: s.gradient != "directional" or
+                                gma_directions(s, KiteParams(), ocp)),
+                               ("building GMA's NLPs", lambda: None)):
+                self.starting = f"starting: {what}"
+                step()
+            self._built = make_gma(s, history=history)
+        except ValueError as err:       # e.g. more privileged directions than setpoints free to move on this box
+            self._built = ParameterError(f"parameters gradient = {self.p['gradient']!r}, n_directions = "
+                                         f"{self.p['n_directions']}: {err}")
+        except Exception as err:  # noqa: BLE001 - reported and turned into a clean exit by _finish_start
+            self._built = err
+
+    def wait_until_started(self, timeout: float | None = None) -> bool:
+        """Block until the start-up work is done and the run is set up (for a node used without spinning, e.g.
+        composed in a test); True once :attr:`run` exists."""
+        self._builder.join(timeout)
+        if self.run is None and not self._builder.is_alive():
+            self._finish_start()
+        return self.run is not None
+
+    def _finish_start(self) -> None:
+        """Executor thread: once the worker is done, subscribe, publish the first setpoints (or exit 2 on an error)."""
+        if self._builder.is_alive() or self.run is not None:
+            return
+        self._build_timer.cancel()
+        built = self._built
+        if isinstance(built, ParameterError):
+            print(f"[kite_rto] refusing to start: {built}", file=sys.stderr, flush=True)
+            return request_exit(self, 2)
+        if not isinstance(built, GMA):
+            self.get_logger().fatal(f"start-up failed: {built!r}")
+            return request_exit(self, 1)
+        self.gma, v, history = built, self.p, self._history
         if history is None:
             self.store.save_history(self.gma.history)
         self.pub_setpoints = self.create_publisher(JointState, SETPOINTS, LATCHED)
-        self.pub_status = self.create_publisher(DiagnosticArray, STATUS, RELIABLE_10)
         self.pub_sync = self.create_publisher(JointState, SYNC, MEASUREMENTS)
-        self.run = OptimizerRun(self.gma, RTOSession(self.gma, spec, self.settings.max_repeats), self.store,
-                                self.settings.box.setpoint_box(), n_iter=v["n_iter"], logger=self.get_logger(),
-                                send_setpoints=self.publish_setpoints, sync=self.publish_sync,
-                                status=self.publish_status, finished=self.finished)
+        self.run = OptimizerRun(self.gma, RTOSession(self.gma, self.settings.experiment, self.settings.max_repeats),
+                                self.store, self.settings.box.setpoint_box(), n_iter=v["n_iter"],
+                                logger=self.get_logger(), send_setpoints=self.publish_setpoints,
+                                sync=self.publish_sync, status=self.publish_status, finished=self.finished)
         self.session = self.run.session
         self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10)
         self.create_subscription(WrenchStamped, TENSION, self.tension_callback, RELIABLE_10)
         self.create_subscription(PointStamped, POSITION, self.position_callback, RELIABLE_10)
         self.create_subscription(Vector3Stamped, WIND, self.wind_callback, RELIABLE_10)
         self.create_subscription(UInt32, CRASHES, self.crashes_callback, LATCHED)
-        self.create_timer(1.0, self.publish_status, clock=Clock(clock_type=ClockType.STEADY_TIME))
         first = self.gma.next_request()
         if history is not None:
             self.get_logger().info(f"resumed from {v['db']}: {len(history.experiments)} experiments, "
@@ -164,6 +214,8 @@ class OptimizerNode(Node):
         setting ``exit_when_done`` to true makes the node exit (code 0) half a second later.
         """
         run = self.run
+        if run is None:                        # still starting: the run takes the values when it is built
+            return
         if "n_iter" in changes and run.done:
             raise ParameterError(f"parameter n_iter = {changes['n_iter']!r}: the run has ended ({run.phase}); "
                                  f"restart the node to run more iterations (it resumes from {self.p['db']})")
@@ -216,9 +268,13 @@ class OptimizerNode(Node):
 
     def publish_status(self) -> None:
         st = DiagnosticStatus(name="kite_rto/optimizer", hardware_id="kite_rto")
-        st.level = DiagnosticStatus.ERROR if self.session.stopped else DiagnosticStatus.OK
-        st.message = self.run.phase
-        st.values = [KeyValue(key=k, value=str(v)) for k, v in self.run.status_values().items()]
+        if self.run is None:
+            st.level, st.message = DiagnosticStatus.OK, self.starting
+            st.values = [KeyValue(key="phase", value=self.starting)]
+        else:
+            st.level = DiagnosticStatus.ERROR if self.session.stopped else DiagnosticStatus.OK
+            st.message = self.run.phase
+            st.values = [KeyValue(key=k, value=str(v)) for k, v in self.run.status_values().items()]
         msg = DiagnosticArray(status=[st])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_status.publish(msg)

@@ -15,6 +15,7 @@ import time
 
 from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -28,6 +29,9 @@ from .plant_config import PARAMS, config_from_params
 from .spin import request_exit, run_node
 from ..flight.sample_join import RejectLog
 from .topics import CLOCK, CRASHES, POSITION, STATE, STEERING, TENSION, WIND
+
+FLUSH_TIMEOUT = 60.0
+"""Wall s the plant waits at the end of its ``duration`` for readers to acknowledge its last samples."""
 
 __all__ = ["PlantNode", "PARAMS", "main"]
 
@@ -210,7 +214,17 @@ class PlantNode(Node):
             self._finished = True
             self.get_logger().info(f"duration reached at t = {m.t:.2f} s; crashes: {m.crashes}; "
                                    f"{self._throughput()}")
+            self._flush()
             request_exit(self, 0)          # SystemExit under rclpy.spin; a flag under run_node's events loop
+
+    def _flush(self) -> None:
+        """Before exiting: wait (at most FLUSH_TIMEOUT wall s) until every reader has acknowledged every sample, so
+        a recorder or monitor that lags behind on a busy machine still gets the last ones."""
+        for pub in (self.pub_clock, self.pub_tension, self.pub_position, self.pub_wind, self.pub_state,
+                    self.pub_crashes):
+            if not pub.wait_for_all_acked(Duration(seconds=FLUSH_TIMEOUT)):
+                self.get_logger().warning(f"{pub.topic_name}: not every reader acknowledged the last samples "
+                                          f"within {FLUSH_TIMEOUT:g} s")
 
     def _throughput(self) -> str:
         if self._first_answer is None:

@@ -19,6 +19,7 @@ from ..kite.params import KiteParams
 from .directions import privileged_directions_for
 from .ocp import KiteOCPSettings, model_problem
 from .settings import KiteRTOSettings
+from .startup_cache import cached, directions_from_json, directions_to_json
 
 __all__ = ["lap_problem", "ModelOptimum", "model_only_optimum", "gma_directions", "make_gma"]
 
@@ -33,6 +34,13 @@ def lap_problem(box: ShapeBox = ShapeBox(), model_params: KiteParams = KiteParam
 
 @lru_cache(maxsize=4)
 def _model_optimum_cached(box, model_params, ocp) -> tuple:
+    """The model optimum's numbers (per process, and on disk: :mod:`.startup_cache`)."""
+    return tuple(tuple(v) if isinstance(v, list) else v for v in
+                 cached("model-optimum", (box, model_params, ocp), lambda: _model_optimum(box, model_params, ocp),
+                        to_json=list, from_json=list))
+
+
+def _model_optimum(box, model_params, ocp) -> tuple:
     from .ocp_solve import solve_model_optimum
     pr = lap_problem(box, model_params, ocp)
     sol = solve_model_optimum(pr)
@@ -68,10 +76,12 @@ def model_only_optimum(box: ShapeBox = ShapeBox(), model_params: KiteParams = Ki
 def gma_directions(settings: KiteRTOSettings, model_params: KiteParams = KiteParams(),
                    ocp: KiteOCPSettings = KiteOCPSettings()) -> PrivilegedDirections:
     """The :class:`~kite_rto.gma.PrivilegedDirections` of ``settings`` (shape coordinates), computed at the
-    model optimum in ``settings.box`` (cached per process; 10.6 s the first time in `benchmarks/bench_ocp.py`)."""
+    model optimum in ``settings.box`` (cached on disk by :mod:`.startup_cache`; 10.6 s to compute in
+    `benchmarks/bench_ocp.py`)."""
     _, _, _, x_opt, nu = _model_optimum_cached(settings.box, model_params, ocp)
-    return privileged_directions_for(settings.box, x_opt, nu, model_params, ocp, settings.uncertainty,
-                                     settings.n_directions)
+    key = (settings.box, x_opt, nu, model_params, ocp, settings.uncertainty, settings.n_directions)
+    return cached("directions", key, lambda: privileged_directions_for(*key), to_json=directions_to_json,
+                  from_json=directions_from_json)
 
 
 def make_gma(settings: KiteRTOSettings | None = None, model_params: KiteParams | None = None,
