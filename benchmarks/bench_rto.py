@@ -17,8 +17,8 @@ GMA and the baselines use the same experiment spec. The oracle is always the det
 noise off, which also makes the two wind models the same plant).
 
 Usage: ``python benchmarks/bench_rto.py [--seeds 5] [--iters 10] [--budget 4] [--wind-model field]
-[--wind-source observer] [--anemometer-correlation 1.0]
-[--gradient directional] [--n-directions 2] [--backoff 6] [--first-seed 0] [--quick] [--no-baselines]`` (``--quick``: 2 seeds, 5 iterations).
+[--wind-source observer] [--anemometer-correlation 1.0] [--gradient directional] [--n-directions 2] [--backoff 6]
+[--first-seed 0] [--quick] [--no-baselines]`` (``--quick``: 2 seeds, 5 iterations).
 With the directional gradient it first prints DMA's privileged directions.
 """
 from __future__ import annotations
