@@ -10,8 +10,15 @@ to reach 99 % on that seed (its whole flight time if it did not); a baseline sto
 reaches 99 %. The summary gives, per seed, the baseline's time to 99 % over GMA's (``>x`` when the baseline
 did not reach 99 % within its budget: the ratio is then above ``x``).
 
-Usage: ``python benchmarks/bench_rto.py [--seeds 5] [--iters 10] [--budget 4] [--anemometer-correlation 1.0]
-[--gradient directional] [--n-directions 2] [--backoff 6] [--first-seed 0] [--quick] [--no-baselines]`` (``--quick``: 2 seeds, 5 iterations).
+The plant is built from the options: ``--wind-model`` (``uniform`` gust or the 3-D ``field``; default the
+plant's default), ``--anemometer-correlation`` (uniform gust only); the experiment cost normalizes by
+``--wind-source`` (default: the default source of that wind model, ``kite_rto.rto.experiment.DEFAULT_WIND_SOURCES``).
+GMA and the baselines use the same experiment spec. The oracle is always the deterministic plant (turbulence and
+noise off, which also makes the two wind models the same plant).
+
+Usage: ``python benchmarks/bench_rto.py [--seeds 5] [--iters 10] [--budget 4] [--wind-model field]
+[--wind-source observer] [--anemometer-correlation 1.0] [--gradient directional] [--n-directions 2] [--backoff 6]
+[--first-seed 0] [--quick] [--no-baselines]`` (``--quick``: 2 seeds, 5 iterations).
 With the directional gradient it first prints DMA's privileged directions.
 """
 from __future__ import annotations
@@ -28,7 +35,9 @@ from kite_rto.rto.settings import KiteRTOSettings
 from kite_rto.rto.builder import gma_directions, model_only_optimum
 from kite_rto.rto.runner import run_rto
 from kite_rto.rto.oracle import find_oracle, plant_performance
-from kite_rto.kite.plant import PlantConfig
+from kite_rto.rto.experiment import default_wind_source
+from kite_rto.rto.wind_source import WIND_SOURCES
+from kite_rto.kite.plant import DEFAULT_WIND_MODEL, WIND_MODELS, PlantConfig
 
 
 def _deg(c):
@@ -42,8 +51,12 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--no-baselines", action="store_true")
     ap.add_argument("--budget", type=float, default=4.0, help="baseline flight time / GMA flight time")
+    ap.add_argument("--wind-model", choices=WIND_MODELS, default=DEFAULT_WIND_MODEL,
+                    help="the plant's wind: one uniform gust or the 3-D turbulence field")
+    ap.add_argument("--wind-source", choices=WIND_SOURCES, default=None,
+                    help="wind the experiment cost normalizes by (default: the wind model's default source)")
     ap.add_argument("--anemometer-correlation", type=float, default=None,
-                    help="plant anemometer gust correlation (default: PlantConfig's)")
+                    help="uniform wind only: plant anemometer gust correlation (default: PlantConfig's)")
     ap.add_argument("--gradient", default=KiteRTOSettings().gradient,
                     choices=("directional", "forward", "central", "least_squares"), help="GMA's plant gradient")
     ap.add_argument("--n-directions", type=int, default=KiteRTOSettings().n_directions,
@@ -55,18 +68,23 @@ def main(argv=None) -> int:
     if args.quick:
         args.seeds, args.iters = min(args.seeds, 2), min(args.iters, 5)
     t_wall = time.perf_counter()
-    config = PlantConfig()
+    config = PlantConfig(wind_model=args.wind_model)
     if args.anemometer_correlation is not None:
         config = replace(config, turbulence=replace(config.turbulence,
                                                     anemometer_correlation=args.anemometer_correlation))
-    settings = KiteRTOSettings(gradient=args.gradient, n_directions=args.n_directions).with_gma(backoff=args.backoff)
+    source = args.wind_source or default_wind_source(args.wind_model)
+    settings = KiteRTOSettings(gradient=args.gradient, n_directions=args.n_directions)
+    settings = replace(settings, experiment=replace(settings.experiment, wind_source=source)
+                       ).with_gma(backoff=args.backoff)
     oracle = find_oracle(config, settings.box)
     target = 0.99 * oracle.tension_kn
     opt = model_only_optimum(settings.box)
     c0, t_model = opt.c, opt.mean_tension_kn
     t0, z0 = plant_performance(config, c0)
-    print(f"bench_rto: {args.seeds} seeds x {args.iters} GMA iterations, plant default (turbulence on, anemometer "
-          f"correlation {config.turbulence.anemometer_correlation:g}), experiment {settings.experiment.n_laps} laps "
+    wind = (f"3-D field (IEC class {config.wind_field.turbulence_class})" if config.wind_model == "field" else
+            f"uniform gust, anemometer correlation {config.turbulence.anemometer_correlation:g}")
+    print(f"bench_rto: {args.seeds} seeds x {args.iters} GMA iterations, plant default (turbulence on), wind {wind}, "
+          f"cost normalized by {source}, experiment {settings.experiment.n_laps} laps "
           f"+ 1 settle lap, gradient {settings.gradient} fd_step {settings.fd_step} "
           f"back-off {settings.gma.backoff:g} m; "
           f"baselines get {args.budget:g}x GMA's time to 99 %")

@@ -44,7 +44,7 @@ def test_evaluator_drops_settling_laps_and_averages_whole_laps():
 
 
 def test_evaluator_normalizes_by_measured_wind_and_flags_crash():
-    spec = ExperimentSpec(settle_time=0.0, settle_laps=0, n_laps=2, w_nominal=8.0)
+    spec = ExperimentSpec(settle_time=0.0, settle_laps=0, n_laps=2, w_nominal=8.0, wind_source="anemometer")
     ev = ExperimentEvaluator(spec)
     ev.start(0.0)
     out, t = None, 0.0
@@ -63,7 +63,7 @@ def test_evaluator_normalizes_by_measured_wind_and_flags_crash():
 
 
 def test_normalization_reduces_lap_scatter_under_turbulence():
-    plant, ctl = make_closed_loop(Setpoints.from_degrees(30, 46, 7), PlantConfig(), seed=3)
+    plant, ctl = make_closed_loop(Setpoints.from_degrees(30, 46, 7), PlantConfig(wind_model="uniform"), seed=3)
     laps = run_closed_loop(plant, ctl, 330.0, record=False).laps_after(30.0)
     assert len(laps) >= 12
     raw = np.array([lap.mean_tension for lap in laps])
@@ -154,3 +154,18 @@ def test_model_uncertainty_rejects_zero_deviation():
     from kite_rto.rto.directions import ModelUncertainty
     with pytest.raises(ValueError, match=r"ModelUncertainty.c_E = 0.0: expected a finite nonzero deviation"):
         ModelUncertainty(c_E=0.0)
+
+
+def test_runner_and_session_normalize_by_the_wind_observer(quick_settings):
+    """The pure runner (through RTOSession) with the observer as the experiment's wind source: every experiment's
+    cost is its laps' tension coefficients scaled to the nominal wind, and the laps' wind is the observer's (at
+    z_ref through the model's shear 0.15 while the plant's is 0.20: ~15 % above the steady 8 m/s)."""
+    spec = replace(quick_settings.experiment, n_laps=1, wind_source="observer")
+    res = run_rto(PlantConfig(wind_model="uniform").without_disturbances(), seed=2, n_iter=1,
+                  settings=replace(quick_settings, experiment=spec))
+    assert res.success and len(res.records) == 1 and res.experiments
+    for e in res.experiments:
+        out = e.outcome
+        assert -out.cost == pytest.approx(np.mean([lap.tension_coefficient for lap in out.laps]) * 64.0 / 1e3)
+        assert all(1.1 < math.sqrt(lap.mean_wind_sq) / 8.0 < 1.2 for lap in out.laps), \
+            [math.sqrt(lap.mean_wind_sq) for lap in out.laps]

@@ -85,18 +85,20 @@ class WindObserver:
 
     Args:
         params: the model's :class:`KiteParams` (tether length r, z_ref and shear for :meth:`reference_wind`).
-        dt: sample time, s.
+        dt: sample time, s; None: the time between consecutive measurements (their ``t``, s).
         settings: :class:`WindObserverSettings`.
         initial: wind reported before enough information has come in, m/s (at the kite).
 
-    Call :meth:`update` once per sample with a measurement (attributes ``theta, psi, theta_dot, phi_dot``).
+    Call :meth:`update` once per sample with a measurement (attributes ``theta, psi, theta_dot, phi_dot``, and
+    ``t`` when ``dt`` is None).
     """
 
-    def __init__(self, params: KiteParams, dt: float, settings: WindObserverSettings | None = None,
+    def __init__(self, params: KiteParams, dt: float | None, settings: WindObserverSettings | None = None,
                  initial: float = math.nan):
         self.params = params
         self.settings = settings or WindObserverSettings()
-        self._forget = math.exp(-dt / self.settings.time_constant)
+        self._forget = None if dt is None else math.exp(-dt / self.settings.time_constant)
+        self._t = None
         self._shy = 0.0
         self._shh = 0.0
         self.wind = float(initial)
@@ -106,6 +108,9 @@ class WindObserver:
         """Add one measurement; returns the estimate of the wind at the kite, m/s."""
         y, h = drift_measurement(m.theta, m.psi, m.theta_dot, m.phi_dot, self.params.r)
         f = self._forget
+        if f is None:                   # forgetting over the time since the previous measurement
+            prev, self._t = self._t, m.t
+            f = 1.0 if prev is None else math.exp(-(m.t - prev) / self.settings.time_constant)
         self._shy = f * self._shy + h * y
         self._shh = f * self._shh + h * h
         if self._shh >= self.settings.min_information:
@@ -126,3 +131,4 @@ class WindObserver:
     def reset(self) -> None:
         """Forget all information (e.g. after a crash)."""
         self._shy = self._shh = 0.0
+        self._t = None

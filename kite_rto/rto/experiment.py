@@ -7,11 +7,12 @@ once ``n_laps`` whole laps are in returns an :class:`ExperimentOutcome` in the u
 ``ModelProblem``: cost = minus the mean line tension in kN, constraint = ``h_min`` minus the minimum altitude
 over the averaged laps, in m.
 
-Turbulence normalization: the tension of a lap scales with the dynamic pressure ``~ w_ref^2``, so a gusty lap
-is worth more than a calm one with the same path. With ``normalize=True`` each lap contributes its tension
-coefficient ``C_T = mean tension / mean(w_ref^2)`` (anemometer at ``z_ref``) scaled back to the nominal wind,
-``C_T * w_nominal^2``: the tension the lap would have given in the nominal wind
-(``benchmarks/bench_normalization.py`` measures the scatter with and without it).
+Turbulence normalization: the tension of a lap scales with the dynamic pressure ``~ w^2``, so a gusty lap is
+worth more than a calm one with the same path. Each lap contributes its tension coefficient
+``C_T = mean tension / mean(w^2)`` scaled back to a reference wind, ``C_T * w_scale^2``: the tension the lap would
+have given in that wind. ``ExperimentSpec.wind_source`` chooses ``w`` and ``w_scale``
+(:mod:`~kite_rto.rto.wind_source`: none, the anemometer at ``z_ref``, the anemometer delayed by the transport
+lag, or the wind observer at the kite; ``benchmarks/bench_normalization.py`` measures the scatter of each).
 """
 from __future__ import annotations
 
@@ -22,8 +23,24 @@ import numpy as np
 
 from ..flight.laps import LapDetector, LapStats
 from ..kite.params import KiteParams, check_range
+from ..kite.plant import DEFAULT_WIND_MODEL
+from .wind_source import WIND_SOURCES, make_wind_source
 
-__all__ = ["ExperimentSpec", "ExperimentOutcome", "ExperimentEvaluator", "PlantFlight"]
+__all__ = ["ExperimentSpec", "ExperimentOutcome", "ExperimentEvaluator", "PlantFlight", "DEFAULT_WIND_SOURCES",
+           "default_wind_source"]
+
+DEFAULT_WIND_SOURCES = {"uniform": "anemometer", "field": "observer"}
+"""The experiment's wind source for each plant wind model (``PlantConfig.wind_model``), chosen by
+``benchmarks/bench_normalization.py``: with the uniform gust the anemometer measures the kite's own gust; in the
+3-D field the observer at the kite scatters least (docs/benchmarks.md, "Realistic wind")."""
+
+
+def default_wind_source(wind_model: str = DEFAULT_WIND_MODEL) -> str:
+    """The default :attr:`ExperimentSpec.wind_source` for a plant with ``wind_model``."""
+    try:
+        return DEFAULT_WIND_SOURCES[wind_model]
+    except KeyError:
+        raise ValueError(f"wind model {wind_model!r}: expected one of {', '.join(DEFAULT_WIND_SOURCES)}") from None
 
 
 @dataclass(frozen=True)
@@ -39,7 +56,11 @@ class ExperimentSpec:
             (``timed_out``; invalid with no lap at all), > 0.
         h_min: minimum altitude of the constraint, m.
         w_nominal: nominal reference wind the normalized tension is scaled to, m/s (the model's ``w_ref``).
-        normalize: average tension coefficients scaled to ``w_nominal`` (True) or raw lap tensions (False).
+        normalize: False: raw lap tensions whatever ``wind_source`` says (kept for older settings:
+            ``normalize=False`` is ``wind_source="none"``).
+        wind_source: the wind the lap tension is normalized by, one of
+            :data:`~kite_rto.rto.wind_source.WIND_SOURCES` (default: :func:`default_wind_source` of the plant's
+            default wind model).
     """
 
     settle_time: float = 10.0
@@ -49,6 +70,7 @@ class ExperimentSpec:
     h_min: float = 100.0
     w_nominal: float = KiteParams().w_ref
     normalize: bool = True
+    wind_source: str = default_wind_source()
 
     def __post_init__(self):
         n = type(self).__name__
@@ -62,6 +84,13 @@ class ExperimentSpec:
         check_range(n, "w_nominal", self.w_nominal, 0.0, low_open=True)
         if not isinstance(self.normalize, bool):
             raise ValueError(f"{n}.normalize = {self.normalize!r}: expected True or False")
+        if self.wind_source not in WIND_SOURCES:
+            raise ValueError(f"{n}.wind_source = {self.wind_source!r}: expected one of {', '.join(WIND_SOURCES)}")
+
+    @property
+    def source(self) -> str:
+        """The wind source in effect: ``"none"`` when ``normalize`` is False, else :attr:`wind_source`."""
+        return self.wind_source if self.normalize else "none"
 
 
 @dataclass
@@ -123,10 +152,17 @@ class ExperimentEvaluator:
     Args:
         spec: :class:`ExperimentSpec`.
         laps: a :class:`LapDetector` (a default one if None); it is reset at every start and crash.
+        model_params: the model's :class:`KiteParams` (the wind sources' shear, z_ref, tether length).
+
+    Every measurement, also between experiments, goes to the wind source (:attr:`wind`): the observer and the
+    transport lag need the flight's history. ``wind_source="observer"`` needs measurements with ``theta_dot`` and
+    ``phi_dot`` (rad/s).
     """
 
-    def __init__(self, spec: ExperimentSpec | None = None, laps: LapDetector | None = None):
+    def __init__(self, spec: ExperimentSpec | None = None, laps: LapDetector | None = None,
+                 model_params: KiteParams | None = None):
         self.spec = spec or ExperimentSpec()
+        self.wind = make_wind_source(self.spec.source, self.spec.w_nominal, model_params)
         self.laps = laps or LapDetector()
         self.c = None
         self.t_start = math.nan
@@ -146,14 +182,16 @@ class ExperimentEvaluator:
         self.laps.reset()
 
     def update(self, m, cross_track: float = math.nan) -> ExperimentOutcome | None:
-        """Add one measurement (``t, theta, phi, tension, position, wind_ref, crashes``)."""
+        """Add one measurement (``t, theta, phi, tension, position, wind_ref, crashes``; for the observer also
+        ``psi, theta_dot, phi_dot``)."""
+        w = self.wind.update(m)
         if not self.active:
             return None
         if self._crashes is None:
             self._crashes = m.crashes
         elif m.crashes != self._crashes:
             return self._finish(m.t, crashed=True)
-        lap = self.laps.update(m.t, m.theta, m.phi, m.tension, m.position[2], cross_track, m.wind_ref)
+        lap = self.laps.update(m.t, m.theta, m.phi, m.tension, m.position[2], cross_track, w)
         sp = self.spec
         if lap is not None and lap.t_start >= self.t_start + sp.settle_time:
             self._seen += 1
@@ -171,8 +209,8 @@ class ExperimentEvaluator:
         n = len(laps)
         if n:
             raw = np.array([lap.mean_tension for lap in laps]) / 1000.0
-            norm = np.array([lap.tension_coefficient for lap in laps]) * sp.w_nominal ** 2 / 1000.0
-            tension = norm if sp.normalize and np.all(np.isfinite(norm)) else raw
+            norm = np.array([lap.tension_coefficient for lap in laps]) * self.wind.scale() ** 2 / 1000.0
+            tension = norm if self.wind.normalizes and np.all(np.isfinite(norm)) else raw
             z = np.array([lap.min_altitude for lap in laps])
             cost, cost_std = -float(np.mean(tension)), _stderr(tension)
             z_min = float(np.min(z))

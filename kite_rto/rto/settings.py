@@ -1,14 +1,14 @@
 """Tuning of GMA on the kite: :class:`KiteRTOSettings` (experiments, gradients, GMA's own settings).
 
 Tuning (``benchmarks/bench_rto.py``, ``benchmarks/bench_normalization.py``): after the tension-coefficient
-normalization a 4-lap experiment's mean scatters by ~1.4 kN, far less than the differences over the
-finite-difference steps (half the box width). GMA therefore takes full steps (filter gain 1) inside a trust
-region of 0.7 box widths, and measures plant derivatives only along the two privileged directions of
-:mod:`~kite_rto.rto.directions` (directional modifier adaptation): theta_0 stays at its robustly active bound, so
-an iteration is 3 experiments instead of 4. The altitude constraint's plant gradient comes from half-box secants
-of a non-smooth function (the lap's minimum altitude), and after a step it can be off by several metres: a
-back-off of 6 m let every iterate from k = 1 pass the judge on 18 of 20 seeds, 4 m on 7 (``benchmarks/bench_rto.py
---backoff``; the README has the numbers).
+normalization a 4-lap experiment's mean scatters by ~1.4 kN with the uniform gust (6.6-8.3 kN in the 3-D field,
+normalized by the wind observer), far less than the differences over the finite-difference steps (half the box
+width). GMA therefore takes full steps (filter gain 1) inside a trust region of 0.7 box widths, and measures plant
+derivatives only along the two privileged directions of :mod:`~kite_rto.rto.directions` (directional modifier
+adaptation): theta_0 stays at its robustly active bound, so an iteration is 3 experiments instead of 4. The altitude
+constraint's plant gradient comes from half-box secants of a non-smooth function (the lap's minimum altitude), and
+after a step it can be off by several metres: a back-off of 6 m let every iterate from k = 1 pass the judge on 18 of
+20 seeds, 4 m on 7 (``benchmarks/bench_rto.py --backoff``; the README has the numbers).
 """
 from __future__ import annotations
 
