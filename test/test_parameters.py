@@ -142,7 +142,8 @@ def test_plant_defaults_are_the_plant_config_defaults():
         for part in path.split("."):
             field = field[int(part)] if part.isdigit() else getattr(field, part)
         default = math.radians(specs[name].default) if name.endswith("_deg") else specs[name].default
-        assert type(default) is type(field) and default == pytest.approx(field, rel=1e-12, abs=0), (name, path)
+        assert type(default) is type(field), (name, path)
+        assert default == (field if isinstance(field, str) else pytest.approx(field, rel=1e-12, abs=0)), (name, path)
     assert config_from_params({s.name: s.default for s in PARAMS}) == config
     assert set(specs) - set(CONFIG_FIELDS) == {"mode", "rate_factor", "seed", "duration", "command_timeout",
                                                "wait_subscribers", "resend_period"}

@@ -162,6 +162,9 @@ class Timeline:
 class SampleJoin:
     """Collects parts keyed by stamp (ns); :meth:`add` returns the completed measurement or None.
 
+    Parts: ``state`` = (theta, phi, psi) rad, optionally followed by their rates rad/s (NaN when absent),
+    ``tension`` N, ``position`` (x, y, z) m, ``wind`` m/s (the anemometer).
+
     The measurement has ``jumped_back = True`` when the timeline restarted before the previous sample (the plant
     restarted; the measurement is the second sample of the new timeline, the first one was the candidate).
     Parts and complete samples that can no longer be used and lie more than ``max_gap_ns`` from the timeline are
@@ -217,6 +220,9 @@ class SampleJoin:
                     if s < stamp - gap or s > stamp + gap:
                         self.discarded.append((s, parts))
         self.timeline.last = stamp
-        (theta, phi, psi), tension, position, wind = (entry[p] for p in PARTS)
-        return SimpleNamespace(t=stamp * 1e-9, theta=theta, phi=phi, psi=psi, tension=tension, position=position,
-                               wind_ref=wind, crashes=self.crashes, stamp=stamp, jumped_back=jumped_back)
+        state, tension, position, wind = (entry[p] for p in PARTS)
+        theta, phi, psi = state[:3]
+        theta_dot, phi_dot, psi_dot = state[3:6] if len(state) >= 6 else (math.nan,) * 3
+        return SimpleNamespace(t=stamp * 1e-9, theta=theta, phi=phi, psi=psi, theta_dot=theta_dot, phi_dot=phi_dot,
+                               psi_dot=psi_dot, tension=tension, position=position, wind_ref=wind,
+                               crashes=self.crashes, stamp=stamp, jumped_back=jumped_back)

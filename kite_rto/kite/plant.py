@@ -30,7 +30,7 @@ PLANT_PARAMS = KiteParams(E=4.6, c_E=2.0, g_s=0.035, shear=0.20)
 WIND_MODELS = ("uniform", "field")
 """``PlantConfig.wind_model`` choices: one gust on the whole wind (:class:`~kite_rto.kite.wind.UniformGust`) or the
 3-D turbulent field (:class:`~kite_rto.kite.wind_field.FieldWind`)."""
-DEFAULT_WIND_MODEL = "uniform"
+DEFAULT_WIND_MODEL = "field"
 """The plant's wind model unless configured otherwise."""
 
 _isfinite = math.isfinite

@@ -32,12 +32,13 @@ from ..kite.params import KiteParams, ParameterError
 from ..rto.optimizer_run import OptimizerRun
 from ..rto.builder import gma_directions, lap_problem, make_gma, model_only_optimum
 from ..rto.ocp import KiteOCPSettings
+from ..rto.wind_source import WIND_SOURCES
 from ..rto.session import RTOSession
 from ..rto.settings import KiteRTOSettings
 from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
 from .parameters import ParamSpec, declare_params
 from .spin import request_exit, run_node
-from .topics import CRASHES, POSITION, SETPOINTS, STATE, STATUS, SYNC, SYNC_NAMES, TENSION, WIND
+from .topics import CRASHES, POSITION, SETPOINTS, STATE, STATUS, SYNC, SYNC_NAMES, TENSION, WIND, WIND_ESTIMATE
 
 __all__ = ["OptimizerNode", "PARAMS", "main"]
 
@@ -57,7 +58,10 @@ PARAMS = (
               "(< max_duration)", 0.0, 600.0, unit="s"),
     ParamSpec("max_duration", _E.max_duration, "simulated time after which an experiment ends with what it has",
               1.0, 1e5, unit="s"),
-    ParamSpec("normalize", _E.normalize, "normalize lap tension by the measured reference wind"),
+    ParamSpec("normalize", _E.normalize, "normalize lap tension by the wind of wind_source (false: raw tension)"),
+    ParamSpec("wind_source", _E.wind_source, "the wind the lap tension is normalized by: the ground anemometer "
+              "(as is, or delayed by the transport lag to the kite) or the observer that estimates the wind at the "
+              "kite from its own motion (published on /kite/wind_estimate)", choices=WIND_SOURCES),
     ParamSpec("h_min", _E.h_min, "minimum altitude (the constraint)", 0.0, 1000.0, unit="m"),
     ParamSpec("gradient", _S.gradient, "plant gradient estimation: directional (DMA: privileged directions "
               "only), or finite differences in every shape coordinate", choices=("directional", "forward",
@@ -123,7 +127,8 @@ class OptimizerNode(Node):
                                  f"({db_dir} is not one)")
         try:
             spec = replace(_E, n_laps=v["n_laps"], settle_laps=v["settle_laps"], settle_time=v["settle_time"],
-                           max_duration=v["max_duration"], normalize=v["normalize"], h_min=v["h_min"])
+                           max_duration=v["max_duration"], normalize=v["normalize"], wind_source=v["wind_source"],
+                           h_min=v["h_min"])
             self.settings = replace(_S, experiment=spec, box=_shape_box(v), gradient=v["gradient"],
                                     n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3
                                     ).with_gma(filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
@@ -190,6 +195,7 @@ class OptimizerNode(Node):
             self.store.save_history(self.gma.history)
         self.pub_setpoints = self.create_publisher(JointState, SETPOINTS, LATCHED)
         self.pub_sync = self.create_publisher(JointState, SYNC, MEASUREMENTS)
+        self.pub_wind_estimate = self.create_publisher(Vector3Stamped, WIND_ESTIMATE, MEASUREMENTS)
         self.run = OptimizerRun(self.gma, RTOSession(self.gma, self.settings.experiment, self.settings.max_repeats),
                                 self.store, self.settings.box.setpoint_box(), n_iter=v["n_iter"],
                                 logger=self.get_logger(), send_setpoints=self.publish_setpoints,
@@ -257,7 +263,15 @@ class OptimizerNode(Node):
         self.pub_setpoints.publish(msg)
 
     def publish_sync(self, stamp: int) -> None:
-        """Tell a synchronized controller that the sample stamped ``stamp`` (ns) is processed (see the module doc)."""
+        """Tell a synchronized controller that the sample stamped ``stamp`` (ns) is processed (see the module doc);
+        publish the wind the cost normalizes by for it (``/kite/wind_estimate``, m/s at z_ref, ``vector.x``)."""
+        w = self.session.evaluator.wind_estimate
+        if math.isfinite(w):
+            est = Vector3Stamped()
+            est.header.stamp = ns_to_stamp(stamp)
+            est.header.frame_id = "anchor"
+            est.vector.x = float(w)
+            self.pub_wind_estimate.publish(est)
         if self.run.c_published is None:        # refused the first setpoints: nothing to fly
             return
         msg = JointState()

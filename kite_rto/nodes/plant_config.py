@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-from ..kite.plant import PlantConfig
+from ..kite.plant import WIND_MODELS, PlantConfig
 from .parameters import ParamSpec
 
 __all__ = ["PARAMS", "CONFIG_FIELDS", "config_default", "config_from_params"]
@@ -20,7 +20,7 @@ CONFIG_FIELDS = {
     "turbulence": "turbulence.enabled", "turbulence_intensity": "turbulence.intensity",
     "turbulence_length": "turbulence.length_scale", "anemometer_noise": "turbulence.anemometer_noise",
     "noise_angle_deg": "noise.angle", "noise_rate": "noise.rate", "noise_tension": "noise.tension",
-    "launch_theta_deg": "launch_state.0",
+    "launch_theta_deg": "launch_state.0", "wind_model": "wind_model",
 }
 """Parameter -> the :class:`PlantConfig` field it sets (dotted path; a number indexes a tuple). Parameters named
 ``*_deg`` are in degrees, the field in rad. Their defaults are read from ``PlantConfig()``."""
@@ -77,6 +77,9 @@ PARAMS = (
     ParamSpec("z_ref", _d("z_ref"), "reference height of the wind profile", 0.5, 200.0, unit="m"),
     ParamSpec("shear", _d("shear"), "wind shear exponent: w = w_ref (z/z_ref)^shear", 0.0, 1.0,
               unit="dimensionless"),
+    ParamSpec("wind_model", _d("wind_model"), "turbulence model: field (3-D Mann box, IEC class B, sampled at the "
+              "kite and at the anemometer; generated once per seed and cached) or uniform (one gust on the whole wind, "
+              "which the anemometer sees too)", choices=WIND_MODELS),
     ParamSpec("turbulence", _d("turbulence"), "turbulence on the reference wind"),
     ParamSpec("turbulence_intensity", _d("turbulence_intensity"), "gust standard deviation / mean wind", 0.0, 1.0,
               unit="dimensionless"),

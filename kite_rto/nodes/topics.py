@@ -2,13 +2,14 @@
 from ..flight.steering_loop import SYNC_NAMES
 
 __all__ = ["CLOCK", "STATE", "POSITION", "TENSION", "WIND", "STEERING", "SETPOINTS", "STATUS", "SYNC", "SYNC_NAMES",
-           "REFERENCE_PATH", "LAPS", "CRASHES"]
+           "REFERENCE_PATH", "LAPS", "CRASHES", "WIND_ESTIMATE"]
 
 CLOCK = "/clock"
 STATE = "/kite/state"
 POSITION = "/kite/position"
 TENSION = "/kite/tension"
 WIND = "/kite/wind"
+WIND_ESTIMATE = "/kite/wind_estimate"
 STEERING = "/kite/steering"
 SETPOINTS = "/rto/setpoints"
 STATUS = "/rto/status"

@@ -163,6 +163,7 @@ class ExperimentEvaluator:
                  model_params: KiteParams | None = None):
         self.spec = spec or ExperimentSpec()
         self.wind = make_wind_source(self.spec.source, self.spec.w_nominal, model_params)
+        self.wind_estimate = math.nan     # the source's reference wind at z_ref for the last measurement, m/s
         self.laps = laps or LapDetector()
         self.c = None
         self.t_start = math.nan
@@ -184,7 +185,7 @@ class ExperimentEvaluator:
     def update(self, m, cross_track: float = math.nan) -> ExperimentOutcome | None:
         """Add one measurement (``t, theta, phi, tension, position, wind_ref, crashes``; for the observer also
         ``psi, theta_dot, phi_dot``)."""
-        w = self.wind.update(m)
+        w = self.wind_estimate = self.wind.update(m)
         if not self.active:
             return None
         if self._crashes is None:

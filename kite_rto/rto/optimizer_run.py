@@ -54,10 +54,10 @@ class OptimizerRun:
     # ------------------------------------------------------------ measurements
     def state_reading(self, stamp: int, names, position, velocity) -> None:
         try:
-            pos, _ = state_values(names, position, velocity)
+            pos, vel = state_values(names, position, velocity)
         except ValueError as err:
             return self.reject("state", f"rejected state message: {err}")
-        self._part(stamp, "state", pos)
+        self._part(stamp, "state", (*pos, *vel))
 
     def reading(self, stamp: int, part: str, value) -> None:
         """A ``tension`` (N), ``position`` ((x, y, z) m) or ``wind`` (m/s) reading of the sample ``stamp``."""

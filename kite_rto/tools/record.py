@@ -50,6 +50,7 @@ TOPICS: dict = {
     T.POSITION: (PointStamped, MEASUREMENTS),
     T.TENSION: (WrenchStamped, MEASUREMENTS),
     T.WIND: (Vector3Stamped, MEASUREMENTS),
+    T.WIND_ESTIMATE: (Vector3Stamped, MEASUREMENTS),
     T.STEERING: (JointState, MEASUREMENTS),
     T.REFERENCE_PATH: (Path, LATCHED),
     T.LAPS: (JointState, RELIABLE_10),
