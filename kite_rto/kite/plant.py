@@ -105,10 +105,10 @@ class PlantConfig:
         check_range(n, "launch_state[psi]", psi, -math.pi, math.pi)
 
     def without_disturbances(self) -> "PlantConfig":
-        """The same kite with no turbulence and no measurement noise (the wind settings are reset to their
-        defaults, which have no effect when turbulence is disabled, so equal kites compare equal)."""
+        """The same kite with no turbulence and no measurement noise: a steady wind, the same whatever the wind
+        model (reset to ``"uniform"``, and the field settings to their defaults, so equal kites compare equal)."""
         return replace(self, turbulence=TurbulenceSettings(enabled=False, anemometer_noise=0.0),
-                       noise=NoiseSettings(0.0, 0.0, 0.0), wind_model=DEFAULT_WIND_MODEL,
+                       noise=NoiseSettings(0.0, 0.0, 0.0), wind_model="uniform",
                        wind_field=WindFieldSettings())
 
     def make_wind(self, seed: int, rng: np.random.Generator) -> WindModel:

@@ -13,10 +13,14 @@ import argparse
 import os
 import sys
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..rto.runner import run_rto
-from ..kite.plant import PlantConfig
+from ..kite.plant import DEFAULT_WIND_MODEL, WIND_MODELS, PlantConfig
+from ..rto.experiment import default_wind_source
+from ..rto.settings import KiteRTOSettings
 from ..gma import History, HistoryStore
 
 __all__ = ["compare_histories", "main"]
@@ -44,6 +48,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="kite_rto compare_pure", description=__doc__.splitlines()[0])
     ap.add_argument("--db", required=True, help="the optimizer's SQLite database")
     ap.add_argument("--seed", type=int, default=0, help="plant seed of the run (the demo's --seed)")
+    ap.add_argument("--wind-model", choices=WIND_MODELS, default=DEFAULT_WIND_MODEL,
+                    help=f"the plant's wind model of the run (the demo's --wind-model; default {DEFAULT_WIND_MODEL})")
     args = ap.parse_args(argv)
     if not os.path.isfile(args.db):
         print(f"compare_pure: no database at {args.db!r}", file=sys.stderr)
@@ -54,7 +60,10 @@ def main(argv=None) -> int:
     if graph is None or not graph.iterations:
         print(f"compare_pure: {args.db!r} holds no finished iteration", file=sys.stderr)
         return 2
-    pure = run_rto(PlantConfig(), seed=args.seed, n_iter=len(graph.iterations)).history
+    settings = replace(KiteRTOSettings(), experiment=replace(KiteRTOSettings().experiment,
+                                                             wind_source=default_wind_source(args.wind_model)))
+    pure = run_rto(PlantConfig(wind_model=args.wind_model), seed=args.seed, n_iter=len(graph.iterations),
+                   settings=settings).history
     diff = compare_histories(graph, pure)
     n_e, n_i = len(graph.experiments), len(graph.iterations)
     if diff:

@@ -35,6 +35,9 @@ def parse_args(argv=None):
     ap.add_argument("--duration", type=float, default=300.0, help="fly: simulated seconds (default 300)")
     ap.add_argument("--seed", type=int, default=0, help="turbulence/noise seed (default 0)")
     ap.add_argument("--no-turbulence", action="store_true", help="steady wind, no measurement noise")
+    ap.add_argument("--wind-model", choices=("field", "uniform"), default="field",
+                    help="the plant's turbulence: field (3-D Mann box, the default) or uniform (one gust the "
+                         "anemometer sees too); the optimizer normalizes by the matching wind source")
     ap.add_argument("--out", default="runs/demo", help="output folder (default runs/demo)")
     ap.add_argument("--mode", choices=("optimize", "fly"), default="optimize", help="default: optimize")
     ap.add_argument("--iterations", type=int, default=10, help="optimize: GMA iterations (default 10)")

@@ -26,7 +26,7 @@ def ros_init() -> None:
 def plant_params(args, wait_subscribers: int, **params) -> dict:
     """The plant node's parameters for a demo run: ``params``, the seed, the /kite/state subscribers to wait for
     and, with ``--no-turbulence``, steady wind and no measurement noise."""
-    params.update(seed=args.seed, wait_subscribers=wait_subscribers)
+    params.update(seed=args.seed, wait_subscribers=wait_subscribers, wind_model=args.wind_model)
     if args.no_turbulence:
         params.update(turbulence=False, anemometer_noise=0.0, noise_angle_deg=0.0, noise_rate=0.0,
                       noise_tension=0.0)

@@ -9,6 +9,7 @@ from pathlib import Path
 import rclpy
 
 from ..gma import HistoryStore
+from ..rto.experiment import default_wind_source
 from ..rto.settings import KiteRTOSettings
 from .demo_graph import plant_params, recorder_summary, ros_init, spin_until, start_recorder
 from .graph import NodeProcess, close_graph, stopped_by_signal
@@ -39,8 +40,8 @@ def optimize(args, env, out: Path, progress) -> int:
     tracker = OptimizeProgress(args.iterations, KiteRTOSettings().experiments_per_iteration())
     try:
         extra = start_recorder(args, log, env, rec, procs)
-        opt = NodeProcess("optimizer", {"db": str(db), "n_iter": args.iterations, "exit_when_done": True},
-                          log=log, env=env)
+        opt = NodeProcess("optimizer", {"db": str(db), "n_iter": args.iterations, "exit_when_done": True,
+                                        "wind_source": default_wind_source(args.wind_model)}, log=log, env=env)
         procs.append(opt)
         print("  starting the optimizer (builds the model's NLPs, ~10-30 s) ...", flush=True)
         if not spin_until(lambda: rec.setpoints or not opt.alive(), rec, 300):
