@@ -41,6 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..cache import cache_dir as shared_cache_dir
 from .model import MIN_WIND_HEIGHT
 from .params import KiteParams, ParameterError, check_range
 from .wind import MIN_REFERENCE_WIND, NormalBlocks, WindModel
@@ -52,7 +53,6 @@ IEC_REFERENCE_INTENSITY = {"A": 0.16, "B": 0.14, "C": 0.12}
 """IEC 61400-1 ed. 3 turbulence categories: expected turbulence intensity I_ref at 15 m/s."""
 IEC_COHERENCE_SCALE = 8.1 * 42.0
 """IEC 61400-1 ed. 3 coherence scale parameter L_c = 8.1 Lambda_1, Lambda_1 = 42 m above 60 m; m."""
-_CACHE_ENV = "KITE_RTO_CACHE"
 _FORMAT = "v1"          # part of the cache key: change it when the generation or scaling changes
 
 
@@ -76,13 +76,8 @@ def iec_coherence(f, separation: float, mean_wind: float, scale: float = IEC_COH
 
 
 def cache_dir() -> str:
-    """Directory of cached wind boxes: ``$KITE_RTO_CACHE`` if set, else the platform's user cache directory for
-    ``kite_rto`` (``platformdirs.user_cache_dir``, e.g. ``~/.cache/kite_rto`` on Linux), subfolder ``wind``."""
-    root = os.environ.get(_CACHE_ENV)
-    if not root:
-        import platformdirs
-        root = platformdirs.user_cache_dir("kite_rto")
-    return os.path.join(root, "wind")
+    """Directory of cached wind boxes: the ``wind`` subfolder of :func:`kite_rto.cache.cache_dir`."""
+    return shared_cache_dir("wind")
 
 
 @dataclass(frozen=True)

@@ -20,16 +20,15 @@ import os
 from dataclasses import dataclass, asdict
 
 import numpy as np
-from platformdirs import user_cache_dir
 
+from ..cache import CACHE_ENV
+from ..cache import cache_dir as shared_cache_dir
 from .experiment import ExperimentSpec, PlantFlight
 from ..flight.shape import ShapeBox
 from ..kite.plant import PlantConfig
 
 __all__ = ["OracleResult", "plant_performance", "find_oracle", "oracle_cache_dir", "CACHE_ENV"]
 
-CACHE_ENV = "KITE_RTO_CACHE"
-"""Environment variable naming the oracle cache directory (overrides the platform's user cache directory)."""
 _SPEC = ExperimentSpec(settle_time=40.0, settle_laps=1, n_laps=3, normalize=False)
 _MEMO: dict = {}
 
@@ -62,11 +61,10 @@ class OracleResult:
 
 
 def oracle_cache_dir(cache_dir: str | os.PathLike | None = None) -> str:
-    """The oracle cache directory: ``cache_dir`` if given, else ``$KITE_RTO_CACHE`` if set and non-empty, else
-    ``platformdirs.user_cache_dir("kite_rto")``. Created when the first result is written."""
-    if cache_dir is not None:
-        return os.fspath(cache_dir)
-    return os.environ.get(CACHE_ENV) or user_cache_dir("kite_rto")
+    """The oracle cache directory: ``cache_dir`` if given, else :func:`kite_rto.cache.cache_dir` (``$KITE_RTO_CACHE``
+    if set and non-empty, else ``platformdirs.user_cache_dir("kite_rto")``). Created when the first result is
+    written."""
+    return os.fspath(cache_dir) if cache_dir is not None else shared_cache_dir()
 
 
 def _key(config: PlantConfig, box: ShapeBox, h_min: float, spec: ExperimentSpec, grid: int) -> str:

@@ -3,8 +3,8 @@
 Both take seconds of NLP solves (10.6 s for the directions in ``benchmarks/bench_ocp.py``) and depend only on the
 model, the OCP settings, the box and the uncertainty, so a restarted optimizer reads them back instead. Entries are
 JSON files named by a hash of the inputs' ``repr`` and of the source of every module that computes them (a code
-change makes a new entry); they live in :func:`~kite_rto.rto.oracle.oracle_cache_dir` / ``startup`` (the user cache
-directory, or ``$KITE_RTO_CACHE``). A missing, unreadable or foreign file is recomputed and rewritten.
+change makes a new entry); they live in :func:`kite_rto.cache.cache_dir` ``("startup")`` (the user
+cache directory, or ``$KITE_RTO_CACHE``). A missing, unreadable or foreign file is recomputed and rewritten.
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..gma import PrivilegedDirections
-from .oracle import oracle_cache_dir
+from ..cache import cache_dir
 
 __all__ = ["cached", "directions_to_json", "directions_from_json", "source_digest"]
 
@@ -40,7 +40,7 @@ def source_digest() -> str:
 
 def _path(kind: str, key) -> Path:
     digest = hashlib.sha1(repr((key, source_digest())).encode()).hexdigest()[:16]
-    return Path(oracle_cache_dir()) / "startup" / f"{kind}-{digest}.json"
+    return Path(cache_dir("startup")) / f"{kind}-{digest}.json"
 
 
 def cached(kind: str, key, compute, to_json=lambda v: v, from_json=lambda v: v):
