@@ -27,7 +27,6 @@ from kite_rto.flight.path import Setpoints
 PER = KiteRTOSettings().experiments_per_iteration()   # experiments of one GMA iteration
 from kite_rto.kite.plant import PlantConfig
 from kite_rto.gma import HistoryStore
-from kite_rto.nodes.interface import LEASE
 
 from faultgraph import QUIET, SHORT, Watch, node, relay, stop_all, unsafe
 from faultlog import fault_row
@@ -117,8 +116,9 @@ def test_controller_and_optimizer_killed_and_restarted(probe, ros_env, request, 
         c["t_kill"] = watch.t
         ctrl.kill()
         w_kill = time.monotonic()
-        # a killed controller's liveliness is lost after the lease (LEASE s); then the lockstep plant flies neutral
-        assert probe.spin_until(lambda: plant.count("flying neutral") >= 1, LEASE + 30.0), plant.text()[-2000:]
+        # DDS drops a killed controller from the graph after its participant lease; then the lockstep plant flies
+        # neutral (generous wait: the lease, not the machine's speed, sets when)
+        assert probe.spin_until(lambda: plant.count("flying neutral") >= 1, 90.0), plant.text()[-2000:]
         c["w_neutral"] = time.monotonic() - w_kill
         t0 = watch.t
         probe.spin_until(lambda: False, 3.0)
@@ -160,7 +160,7 @@ def test_controller_and_optimizer_killed_and_restarted(probe, ros_env, request, 
         lost, repeated, dc, history, counts = check_iteration(db, pure, o["done_before"], opt, opt2)
         row.experiments_lost, row.unsafe_setpoints = lost, unsafe
         row.outcome = (f"killed at t = {c['t_kill']:.1f} s; the plant flew neutral after {c['w_neutral']:.1f} s wall "
-                       f"(liveliness lease {LEASE:g} s, then command_timeout 1 s) and kept its clock ({c['neutral_sim']:.2f} s simulated in 3 s wall); "
+                       f"(once DDS dropped the killed controller from the graph) and kept its clock ({c['neutral_sim']:.2f} s simulated in 3 s wall); "
                        f"the restarted controller answered {c['w_back']:.1f} s after its start, having first taken "
                        f"the current setpoints from the latched /rto/setpoints ({c['took']} deg, latched "
                        f"{c['latched']} deg); the loop ran on at {c['rate']:.0f}x real time; the iteration "

@@ -11,7 +11,10 @@ from kite_rto.rto.settings import KiteRTOSettings
 from kite_rto.rto.runner import run_rto
 from kite_rto.kite.plant import PlantConfig
 from kite_rto.flight.shape import setpoints_from_shape
+from geometry_msgs.msg import Vector3Stamped
+
 from kite_rto.gma import HistoryStore
+from kite_rto.nodes.interface import MEASUREMENTS, stamp_to_ns
 
 from rosutil import Probe, start_node, stop
 
@@ -55,6 +58,9 @@ def test_graph_flies_the_pure_runners_sequence(probe, ros_env, tmp_path, plant_p
     """With the controller synchronized to the optimizer (lockstep), the three processes fly exactly what
     run_rto flies: the same experiments, bit-identical measured costs and the same GMA iterates."""
     db = tmp_path / "rto.sqlite"
+    estimates = []                     # /kite/wind_estimate: the wind the cost is normalized by, per sample
+    probe.node.create_subscription(Vector3Stamped, "/kite/wind_estimate", lambda m: estimates.append(
+        (stamp_to_ns(m.header.stamp), m.vector.x)), MEASUREMENTS)
     opt, ctrl, plant = start_graph(probe, db, ros_env, sync=True, plant=plant_params, n_iter=n_iter)
     try:
         assert probe.spin_until(lambda: opt.poll() is not None, 600.0), "optimizer did not finish"
@@ -77,7 +83,11 @@ def test_graph_flies_the_pure_runners_sequence(probe, ros_env, tmp_path, plant_p
     np.testing.assert_array_equal(ros_cost, [e.outcome.cost for e in pure.experiments])
     np.testing.assert_array_equal(ros_next, pure.iterates[1:])
     assert f"done: {n_iter} iterations" in out
-    assert "no optimizer alive" not in ctrl_out, ctrl_out       # never released a sample unsynchronized
+    assert "no optimizer in the graph" not in ctrl_out, ctrl_out      # never released a sample unsynchronized
+    stamps = np.array([s for s, _ in estimates])
+    winds = np.array([w for _, w in estimates])
+    assert len(estimates) > 1000 and np.all(np.diff(stamps) > 0) and np.all(stamps % 20_000_000 == 0)
+    assert np.all(np.isfinite(winds)) and 1.0 < np.median(winds) < 20.0, np.percentile(winds, [0, 50, 100])
 
 
 def test_killed_optimizer_resumes_from_its_database(probe, ros_env, tmp_path):

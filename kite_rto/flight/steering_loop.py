@@ -12,10 +12,10 @@ readings, or readings stamped far from the last sample, are rejected with thrott
 
 Synchronization (``sync=True``): sample k is answered once the optimizer's sync message for it is in (the
 setpoints in force, applied first when its count of setpoint messages changed: the pure runner's order). It waits
-as long as an optimizer is alive (``sync_alive()`` > 0: the DDS liveliness of the /rto/sync writers), however long
-the optimizer takes, so the answer never depends on wall time; only when no optimizer has been alive for
-:data:`SYNC_ABSENT` s is the sample answered unsynchronized, and from then on samples are answered at once until a
-sync message arrives again.
+as long as an optimizer is in the graph (``sync_sources()`` > 0: publishers of /rto/sync), however long the
+optimizer takes, so the answer never depends on wall time; only when none has been in the graph for
+:data:`SYNC_ABSENT` s (it exited, or DDS dropped a killed or frozen one after its participant lease) is the sample
+answered unsynchronized, and from then on samples are answered at once until a sync message arrives again.
 """
 from __future__ import annotations
 
@@ -32,9 +32,9 @@ from .sample_join import Place, RejectLog, Timeline, reading_error, state_values
 __all__ = ["SteeringLoop", "fmt_setpoints", "SYNC_ABSENT", "SETPOINTS_GRACE", "SETPOINTS_WAIT", "SYNC_NAMES"]
 
 SYNC_ABSENT = 1.0
-"""Wall s a sample waits for /rto/sync while no optimizer is alive before it is answered unsynchronized."""
+"""Wall s a sample waits for /rto/sync while no optimizer is in the graph before it is answered unsynchronized."""
 SYNC_WAIT_LOG = 10.0
-"""Wall s between the log lines of a sample that waits for a live but slow optimizer."""
+"""Wall s between the log lines of a sample that waits for a slow optimizer."""
 SETPOINTS_GRACE, SETPOINTS_WAIT = 1.0, 3.0
 """Wall s after start-up during which the controller waits for /rto/setpoints before steering (see
 :meth:`SteeringLoop._await_setpoints`): always for the first, while an optimizer is known for the second."""
@@ -72,12 +72,12 @@ class SteeringLoop:
     """
 
     def __init__(self, params, settings, c0: Setpoints, *, answer, lap, path, logger, sync: bool = False,
-                 setpoint_sources=lambda: 0, sync_alive=lambda: 0, clock=time.monotonic):
+                 setpoint_sources=lambda: 0, sync_sources=lambda: 0, clock=time.monotonic):
         self.params, self.settings = params, settings
         self.controller = PathController(shared_model(), params, c0, settings)
         self.laps = LapDetector()
         self._answer, self._lap, self._path, self.log = answer, lap, path, logger
-        self._setpoint_sources, self._sync_alive, self._clock = setpoint_sources, sync_alive, clock
+        self._setpoint_sources, self._sync_sources, self._clock = setpoint_sources, sync_sources, clock
         self.reject = RejectLog(logger, clock=clock)
         self.timeline = Timeline()
         self._wind, self._tension, self._altitude = params.w_ref, math.nan, math.nan
@@ -92,9 +92,9 @@ class SteeringLoop:
         self.sync = sync
         self._syncs = {}                  # sync entries by stamp (ns): (setpoints rad, updates)
         self._sync_held = None            # (stamp, measurement, position, wall time): waits for its sync
-        self._sync_lost = False           # no optimizer alive: answer at once until a sync message arrives again
+        self._sync_lost = False           # no optimizer: answer at once until a sync message arrives again
         self._sync_updates = None         # `updates` of the last applied sync
-        self._sync_seen = -math.inf       # wall time an optimizer was last seen alive while a sample waited
+        self._sync_seen = -math.inf       # wall time an optimizer was last seen in the graph while a sample waited
 
     # -------------------------------------------------------------- measurements
     def wind_reading(self, stamp: int, v: float) -> None:
@@ -341,19 +341,18 @@ class SteeringLoop:
             _keep(self._syncs, stamp, (vals[:3], vals[3]))
 
     def watchdog(self) -> None:
-        """Call periodically (the node: every 0.05 s): releases a held sample once no optimizer is alive."""
+        """Call periodically (the node: every 0.05 s): releases a held sample once no optimizer is in the graph."""
         held = self._sync_held
         if held is None:
             return
         now = self._clock()
-        if self._sync_alive() > 0:
+        if self._sync_sources() > 0:
             self._sync_seen = now
             if now - held[3] > SYNC_WAIT_LOG:
                 self.log.info(f"sample at {held[0] * 1e-9:.2f} s: waiting {now - held[3]:.0f} s for the optimizer's "
-                              "/rto/sync (the optimizer is alive)", throttle_duration_sec=SYNC_WAIT_LOG)
+                              "/rto/sync (the optimizer is in the graph)", throttle_duration_sec=SYNC_WAIT_LOG)
         elif now - max(held[3], self._sync_seen) > SYNC_ABSENT:
-            self._release_unsynced(f"no optimizer alive for {SYNC_ABSENT:g} s (none in the graph, or it stopped, "
-                                   "died or stalled)")
+            self._release_unsynced(f"no optimizer in the graph for {SYNC_ABSENT:g} s")
 
     def _release_unsynced(self, why: str) -> None:
         """Answer the held sample with the latest setpoints; answer at once until a sync message is back."""

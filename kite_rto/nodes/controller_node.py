@@ -17,7 +17,6 @@ import numpy as np
 from geometry_msgs.msg import PointStamped, PoseStamped, Vector3Stamped, WrenchStamped
 from nav_msgs.msg import Path
 from rclpy.clock import Clock, ClockType
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
@@ -25,7 +24,7 @@ from ..flight.controller import ControllerSettings, PathController
 from ..flight.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, Setpoints, SetpointError
 from ..flight.steering_loop import SteeringLoop, fmt_setpoints
 from ..kite.params import KiteParams, ParameterError
-from .interface import ALIVE_10, LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
+from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
 from .parameters import ParamSpec, declare_params
 from .spin import run_node
 from .topics import LAPS, POSITION, REFERENCE_PATH, SETPOINTS, STATE, STEERING, SYNC, TENSION, WIND
@@ -57,7 +56,7 @@ PARAMS = (
               0.0, 100.0, unit="1/s^2", runtime=True),
     ParamSpec("sync_optimizer", False, "lockstep: answer each sample only after the optimizer has processed it "
               "(/rto/sync) and take the setpoints from there, so the graph flies exactly the pure runner's sequence; "
-              "it waits as long as the optimizer is alive, and answers at once when none is"),
+              "it waits as long as an optimizer is in the graph, and answers at once when none is"),
     ParamSpec("blend_time", _C.blend_time, "duration of the blend to new setpoints (0: switch at once)", 0.0, 600.0,
               unit="s", runtime=True),
     ParamSpec("E", KiteParams.E, "model glide ratio (nominal)", 0.5, 30.0, unit="dimensionless"),
@@ -109,7 +108,7 @@ class ControllerNode(Node):
             self.loop = SteeringLoop(params, settings, c0, answer=self.answer, lap=self.publish_lap,
                                      path=self.publish_path, logger=self.get_logger(), sync=v["sync_optimizer"],
                                      setpoint_sources=lambda: self.count_publishers(SETPOINTS),
-                                     sync_alive=lambda: self._sync_alive)
+                                     sync_sources=lambda: self.count_publishers(SYNC))
         except SetpointError as err:
             raise ParameterError(f"initial setpoints (theta_0_deg, A_phi_deg, A_theta_deg): {err}") from None
         self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10)
@@ -118,9 +117,7 @@ class ControllerNode(Node):
         self.create_subscription(PointStamped, POSITION, self.position_callback, RELIABLE_10)
         self.create_subscription(JointState, SETPOINTS, self.setpoints_callback, LATCHED)
         if self.loop.sync:
-            self._sync_alive = 0          # /rto/sync writers whose liveliness holds
-            self.create_subscription(JointState, SYNC, self.sync_callback, ALIVE_10, event_callbacks=(
-                SubscriptionEventCallbacks(liveliness=lambda info: setattr(self, "_sync_alive", info.alive_count))))
+            self.create_subscription(JointState, SYNC, self.sync_callback, RELIABLE_10)
             self.create_timer(0.05, self.loop.watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.publish_path()
         self.get_logger().info(f"controller up: setpoints {fmt_setpoints(c0)}")

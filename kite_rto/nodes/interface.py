@@ -7,34 +7,18 @@ from __future__ import annotations
 import math
 
 from builtin_interfaces.msg import Time
-from rclpy.duration import Duration
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-__all__ = ["RELIABLE_10", "MEASUREMENTS", "LATCHED", "ALIVE_10", "LEASE", "stamp_to_ns", "ns_to_stamp",
-           "finite_floats"]
-
-LEASE = 5.0
-"""Liveliness lease, s. Every per-sample publisher offers it (DDS asserts it from the process's own middleware
-threads, so a busy Python callback does not stop it; a killed, stopped or hung-in-the-kernel process does), and the
-two handshake readers (the plant's /kite/steering, the controller's /rto/sync) request it: in lockstep they wait
-for a peer as long as its liveliness holds, however slow it is, and fall back only when it is lost."""
-_LIVELY = dict(liveliness=LivelinessPolicy.AUTOMATIC, liveliness_lease_duration=Duration(seconds=LEASE))
+__all__ = ["RELIABLE_10", "MEASUREMENTS", "LATCHED", "stamp_to_ns", "ns_to_stamp", "finite_floats"]
 
 RELIABLE_10 = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.VOLATILE)
 """Measurements and steering: reliable, depth 10 (lockstep must not lose a sample)."""
 MEASUREMENTS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
-                          durability=DurabilityPolicy.VOLATILE, **_LIVELY)
+                          durability=DurabilityPolicy.VOLATILE)
 """Publishers of per-sample topics (measurements, steering): reliable with a deep history (20 s of samples at
 50 Hz), so that a subscriber stalled by CPU load (a recorder, a monitor) catches up instead of losing samples.
-Subscribers stay at ``RELIABLE_10``: the depth is not part of QoS compatibility. They offer the liveliness lease
-:data:`LEASE` (compatible with every reader)."""
-ALIVE_10 = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.VOLATILE, **_LIVELY)
-"""Handshake readers (/kite/steering at the plant, /rto/sync at the controller): ``RELIABLE_10`` that requests the
-liveliness lease :data:`LEASE`, so the reader learns within about a lease when its peer dies or stalls. Only writers
-that offer a lease of at most :data:`LEASE` match (``MEASUREMENTS`` does; a default-QoS writer, e.g. a plain
-``ros2 topic pub``, needs ``--qos-liveliness automatic --qos-liveliness-lease-duration 5``)."""
+Subscribers stay at ``RELIABLE_10``: the depth is not part of QoS compatibility."""
 LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 """Setpoints: a late joiner gets the current value."""

@@ -16,7 +16,6 @@ import math
 import os
 import sys
 import threading
-from dataclasses import replace
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
@@ -25,116 +24,33 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
-from ..flight.path import Setpoints, SetpointError, validate_setpoints
-from ..flight.shape import ShapeBox, setpoints_from_shape
+from ..flight.path import Setpoints
+from ..flight.shape import setpoints_from_shape
 from ..gma import GMA, HistoryStore
 from ..kite.params import KiteParams, ParameterError
-from ..rto.optimizer_run import OptimizerRun
 from ..rto.builder import gma_directions, lap_problem, make_gma, model_only_optimum
 from ..rto.ocp import KiteOCPSettings
-from ..rto.wind_source import WIND_SOURCES
+from ..rto.optimizer_run import OptimizerRun
 from ..rto.session import RTOSession
-from ..rto.settings import KiteRTOSettings
 from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
-from .parameters import ParamSpec, declare_params
+from .optimizer_params import PARAMS, cross_check, settings_from_params
+from .parameters import declare_params
 from .spin import request_exit, run_node
 from .topics import CRASHES, POSITION, SETPOINTS, STATE, STATUS, SYNC, SYNC_NAMES, TENSION, WIND, WIND_ESTIMATE
 
 __all__ = ["OptimizerNode", "PARAMS", "main"]
-
-_S = KiteRTOSettings()
-_E = _S.experiment
-PARAMS = (
-    ParamSpec("db", "rto.sqlite", "SQLite file of experiments and iterations (resume source), in an existing "
-              "directory"),
-    ParamSpec("resume", True, "continue from the database if it holds a run"),
-    ParamSpec("n_iter", 10, "GMA iterations to run, then hold the last setpoints (0 = no limit)", 0, 10000,
-              unit="iterations", runtime=True),
-    ParamSpec("exit_when_done", False, "exit (code 0) once n_iter iterations are done (needs n_iter > 0)",
-              runtime=True),
-    ParamSpec("n_laps", _E.n_laps, "whole laps averaged per experiment", 1, 100, unit="laps"),
-    ParamSpec("settle_laps", _E.settle_laps, "whole laps dropped after a setpoint change", 0, 100, unit="laps"),
-    ParamSpec("settle_time", _E.settle_time, "simulated time after a setpoint change before a lap may count "
-              "(< max_duration)", 0.0, 600.0, unit="s"),
-    ParamSpec("max_duration", _E.max_duration, "simulated time after which an experiment ends with what it has",
-              1.0, 1e5, unit="s"),
-    ParamSpec("normalize", _E.normalize, "normalize lap tension by the wind of wind_source (false: raw tension)"),
-    ParamSpec("wind_source", _E.wind_source, "the wind the lap tension is normalized by: the ground anemometer "
-              "(as is, or delayed by the transport lag to the kite) or the observer that estimates the wind at the "
-              "kite from its own motion (published on /kite/wind_estimate)", choices=WIND_SOURCES),
-    ParamSpec("h_min", _E.h_min, "minimum altitude (the constraint)", 0.0, 1000.0, unit="m"),
-    ParamSpec("gradient", _S.gradient, "plant gradient estimation: directional (DMA: privileged directions "
-              "only), or finite differences in every shape coordinate", choices=("directional", "forward",
-                                                                                 "central", "least_squares")),
-    ParamSpec("n_directions", _S.n_directions, "privileged directions measured per iteration (gradient "
-              "directional), at most the setpoints not held at a robustly active bound (2 on the default box, "
-              "where theta_0 is held)", 1, 3, unit="directions"),
-    ParamSpec("fd_step", float(_S.fd_step[0]), "finite-difference step (directional: along each direction)",
-              0.01, 1.0, unit="fraction of the shape box width"),
-    ParamSpec("filter_gain", _S.gma.filter_gain, "GMA input filter K", 0.01, 1.0, unit="dimensionless"),
-    ParamSpec("modifier_filter", _S.gma.modifier_filter, "GMA filter on the gradient modifiers (1 = none)", 0.01, 1.0,
-              unit="dimensionless"),
-    ParamSpec("trust_radius", _S.gma.trust_radius, "initial trust radius (not below GMA's minimum trust radius)",
-              _S.gma.trust_radius_min, 10.0, unit="fraction of the box width"),
-    ParamSpec("box_theta_0_deg", [round(math.degrees(v), 9) for v in _S.box.theta_0], "optimizer's theta_0 range [low, high]",
-              1.0, 89.0, unit="deg"),
-    ParamSpec("box_A_phi_deg", [round(math.degrees(v), 9) for v in _S.box.A_phi], "optimizer's A_phi range [low, high]",
-              0.1, 89.0, unit="deg"),
-    ParamSpec("box_aspect", list(_S.box.aspect), "optimizer's aspect range [low, high], aspect = A_theta / "
-              "sqrt(sin theta_0 A_phi); every point of the box must be trackable", 0.01, 2.0, unit="dimensionless"),
-)
-
-
-def _cross_check(v: dict) -> None:
-    """Checks that involve several parameters (start-up and every runtime change)."""
-    if not v["settle_time"] < v["max_duration"]:
-        raise ParameterError(f"parameters settle_time = {v['settle_time']!r}, max_duration = {v['max_duration']!r}: "
-                             "expected settle_time < max_duration (else no lap can count)")
-    if v["exit_when_done"] and v["n_iter"] == 0:
-        raise ParameterError(f"parameters exit_when_done = {v['exit_when_done']!r}, n_iter = 0: expected n_iter > 0 "
-                             "when exit_when_done is true (n_iter = 0 never ends)")
-
-
-def _shape_box(v: dict) -> ShapeBox:
-    """The optimizer's :class:`ShapeBox` from the box parameters; every point of a 3x3x3 grid must track."""
-    pairs = {}
-    for name, key, scale in (("theta_0", "box_theta_0_deg", math.pi / 180), ("A_phi", "box_A_phi_deg", math.pi / 180),
-                             ("aspect", "box_aspect", 1.0)):
-        lo, hi = v[key]
-        if not lo < hi:
-            raise ParameterError(f"parameter {key} = {list(v[key])!r}: expected [low, high] with low < high")
-        pairs[name] = (lo * scale, hi * scale)
-    try:
-        box = ShapeBox(**pairs)
-        for x in box.grid(3):
-            validate_setpoints(setpoints_from_shape(x), box.setpoint_box(), KiteParams())
-    except SetpointError as err:
-        raise ParameterError(f"parameters box_theta_0_deg = {list(v['box_theta_0_deg'])}, box_A_phi_deg = "
-                             f"{list(v['box_A_phi_deg'])}, box_aspect = {list(v['box_aspect'])}: expected a box "
-                             f"whose every point is a trackable figure-eight: {err}") from None
-    return box
-
 
 class OptimizerNode(Node):
     """Runs GMA experiments on the flying kite and publishes setpoints and status."""
 
     def __init__(self, **kwargs):
         super().__init__("optimizer", **kwargs)
-        v = self.p = declare_params(self, PARAMS, apply=self.apply_params, cross_check=_cross_check)
+        v = self.p = declare_params(self, PARAMS, apply=self.apply_params, cross_check=cross_check)
         db_dir = os.path.dirname(os.path.abspath(v["db"]))
         if v["db"] != ":memory:" and not os.path.isdir(db_dir):
             raise ParameterError(f"parameter db = {v['db']!r}: expected a file in an existing directory "
                                  f"({db_dir} is not one)")
-        try:
-            spec = replace(_E, n_laps=v["n_laps"], settle_laps=v["settle_laps"], settle_time=v["settle_time"],
-                           max_duration=v["max_duration"], normalize=v["normalize"], wind_source=v["wind_source"],
-                           h_min=v["h_min"])
-            self.settings = replace(_S, experiment=spec, box=_shape_box(v), gradient=v["gradient"],
-                                    n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3
-                                    ).with_gma(filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
-                                               trust_radius=v["trust_radius"])
-        except ValueError as err:
-            raise ParameterError(str(err)) from None
+        self.settings = settings_from_params(v)
         self.store = HistoryStore(v["db"])
         history = self.store.load() if v["resume"] else None
         self.run = None                        # the GMA run, once built (see _build)
@@ -196,6 +112,7 @@ class OptimizerNode(Node):
         self.pub_setpoints = self.create_publisher(JointState, SETPOINTS, LATCHED)
         self.pub_sync = self.create_publisher(JointState, SYNC, MEASUREMENTS)
         self.pub_wind_estimate = self.create_publisher(Vector3Stamped, WIND_ESTIMATE, MEASUREMENTS)
+        self._estimate_stamp = None
         self.run = OptimizerRun(self.gma, RTOSession(self.gma, self.settings.experiment, self.settings.max_repeats),
                                 self.store, self.settings.box.setpoint_box(), n_iter=v["n_iter"],
                                 logger=self.get_logger(), send_setpoints=self.publish_setpoints,
@@ -266,7 +183,8 @@ class OptimizerNode(Node):
         """Tell a synchronized controller that the sample stamped ``stamp`` (ns) is processed (see the module doc);
         publish the wind the cost normalizes by for it (``/kite/wind_estimate``, m/s at z_ref, ``vector.x``)."""
         w = self.session.evaluator.wind_estimate
-        if math.isfinite(w):
+        if math.isfinite(w) and stamp != self._estimate_stamp:      # once per sample (a re-sync repeats none)
+            self._estimate_stamp = stamp
             est = Vector3Stamped()
             est.header.stamp = ns_to_stamp(stamp)
             est.header.frame_id = "anchor"

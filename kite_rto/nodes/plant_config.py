@@ -95,8 +95,8 @@ PARAMS = (
               1.0, unit="dimensionless"),
     ParamSpec("launch_theta_deg", _d("launch_theta_deg"), "theta after launch and after a crash (phi = psi = 0)",
               1.0, 89.0, unit="deg"),
-    ParamSpec("command_timeout", 1.0, "wall time without steering before flying neutral (lockstep: only while no "
-              "steering writer is alive)", 0.01, 60.0,
+    ParamSpec("command_timeout", 1.0, "wall time without steering before flying neutral (lockstep: only once no "
+              "publisher of /kite/steering is in the graph)", 0.01, 60.0,
               unit="s (wall)", runtime=True),
     ParamSpec("wait_subscribers", 1, "lockstep: subscribers of /kite/state to wait for before the first step", 0,
               100, unit="subscribers", runtime=True),

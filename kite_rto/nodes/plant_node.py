@@ -4,10 +4,10 @@ Modes: ``lockstep`` publishes sample k and advances only when the steering comma
 arrives (deterministic, as fast as the loop allows; a lost message is recovered by re-publishing the sample);
 ``realtime`` advances at wall-clock pace times ``rate_factor`` with a zero-order hold on the last command.
 Real time: without commands for ``command_timeout`` seconds (wall clock) the kite flies neutral (delta = 0) and says
-so. Lockstep: the plant waits for each answer as long as a steering writer's DDS liveliness holds (so what the kite
-flies never depends on how fast the machine is), and flies neutral, keeping its clock going, only once no writer has
-been alive for ``command_timeout`` s (the controller died or stalled); this starts after the first command, so a run
-does not depend on how long the controller takes to start.
+so. Lockstep: the plant waits for each answer as long as a publisher of /kite/steering is in the graph (so what the
+kite flies never depends on how fast the machine is), and flies neutral, keeping its clock going, only once none is
+and ``command_timeout`` s have passed (the controller left, or DDS dropped a killed or frozen one); this starts after
+the first command, so a run does not depend on how long the controller takes to start.
 """
 from __future__ import annotations
 
@@ -16,14 +16,13 @@ import time
 from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
 from ..kite.plant import KitePlant
-from .interface import ALIVE_10, LATCHED, MEASUREMENTS, finite_floats, ns_to_stamp, stamp_to_ns
+from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, finite_floats, ns_to_stamp, stamp_to_ns
 from .parameters import declare_params
 from .plant_config import PARAMS, config_from_params
 from .spin import request_exit, run_node
@@ -86,9 +85,7 @@ class PlantNode(Node):
         self.pub_wind = self.create_publisher(Vector3Stamped, WIND, MEASUREMENTS)
         self.pub_crashes = self.create_publisher(UInt32, CRASHES, LATCHED)
         self.pub_crashes.publish(UInt32(data=0))
-        self._pilots_alive = 0            # steering writers whose liveliness holds (lockstep waits for them)
-        self.create_subscription(JointState, STEERING, self.steering_callback, ALIVE_10,
-                                 event_callbacks=SubscriptionEventCallbacks(liveliness=self.liveliness_callback))
+        self.create_subscription(JointState, STEERING, self.steering_callback, RELIABLE_10)
         self._finished = False
         self._first_answer = None          # (wall time, step) of the first accepted command: throughput log
         self._delta = 0.0                 # last valid command (realtime zero-order hold)
@@ -163,33 +160,27 @@ class PlantNode(Node):
         self.get_logger().info(f"waiting for {self.p['wait_subscribers']} subscribers of /kite/state "
                                f"({self.pub_state.get_subscription_count()} connected)", throttle_duration_sec=5.0)
 
-    def liveliness_callback(self, info) -> None:
-        """The number of live steering writers changed (a controller came, left, died or stalled)."""
-        self._pilots_alive = info.alive_count
-        if info.alive_count == 0 and self._commands:
-            self.get_logger().warning("no steering writer is alive any more (the controller stopped, died or "
-                                      "stalled)")
-
     def watchdog_callback(self) -> None:
-        """Lockstep: re-publish an unanswered sample; fly neutral only when no steering writer is alive.
+        """Lockstep: re-publish an unanswered sample; fly neutral only when no steering writer is in the graph.
 
         Before the first command ever arrives the plant only waits (and re-publishes), so a lockstep run does
         not depend on how long the controller takes to start. After that it waits for each answer as long as a
-        steering writer's liveliness holds, however long the answer takes (the controller may be waiting for a
-        slow optimizer, or the machine may be busy): what the kite flies never depends on wall time. When no
-        writer is alive for ``command_timeout`` s it flies neutral and keeps its clock going.
+        publisher of /kite/steering is in the graph, however long the answer takes (the controller may be waiting
+        for a slow optimizer, or the machine may be busy): what the kite flies never depends on wall time. Once
+        none is (the controller left, or DDS dropped a killed or frozen one after its participant lease) and
+        ``command_timeout`` s have passed without a command, it flies neutral and keeps its clock going.
         """
         if self._finished:
             return
         now = time.monotonic()
         silent = now - self._last_command
-        if self._commands and silent > self.p["command_timeout"] and self._pilots_alive == 0:
+        if self._commands and silent > self.p["command_timeout"] and self.count_publishers(STEERING) == 0:
             self._fly_neutral()
             self.advance(0.0)
             return
         if self._commands and silent > self.p["command_timeout"]:
             self.get_logger().info(f"lockstep: waiting {silent:.0f} s for the steering of sample "
-                                   f"{self.plant.k * self.p['dt']:.2f} s (its writer is alive)",
+                                   f"{self.plant.k * self.p['dt']:.2f} s (its controller is in the graph)",
                                    throttle_duration_sec=10.0)
         if now - self._last_publish > self.p["resend_period"]:
             self.publish_sample()

@@ -32,7 +32,7 @@ from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
-from ..nodes.interface import LATCHED, MEASUREMENTS, RELIABLE_10, stamp_to_ns
+from ..nodes.interface import LATCHED, RELIABLE_10, stamp_to_ns
 from ..nodes.spin import run_node
 from ..nodes.topics import CRASHES, STATE
 
@@ -99,8 +99,7 @@ def make_node(args):
             self._queue: list = []
             self._seq = 0
             self._last_release = 0.0
-            # offers the nodes' liveliness lease, so a handshake reader (the plant's steering) matches it
-            self.pub = self.create_publisher(args.msg_type, args.out, LATCHED if args.latched else MEASUREMENTS)
+            self.pub = self.create_publisher(args.msg_type, args.out, qos)
             self.create_subscription(args.msg_type, args.inp, self.on_message, qos, raw=True)
             if args.delay > 0 or args.jitter > 0:
                 self.create_timer(0.002, self.release, clock=Clock(clock_type=ClockType.STEADY_TIME))
