@@ -78,7 +78,21 @@ class _TwoSolvers:
                          solve_time=dt, warm=warm)
 
 
-class RealizationNLP:
+class _WarmStarted:
+    """An NLP wrapper whose :attr:`last` result (the warm start of the next solve) lives in its ``_nlp``."""
+
+    _nlp: _TwoSolvers
+
+    @property
+    def last(self) -> NLPResult | None:
+        return self._nlp.last
+
+    @last.setter
+    def last(self, value: NLPResult | None) -> None:
+        self._nlp.last = value
+
+
+class RealizationNLP(_WarmStarted):
     """``min_u phi(u) s.t. y(u) = c`` (+ equalities, inner constraints, bounds), parameter ``c`` (n_c,)."""
 
     def __init__(self, problem: ModelProblem, settings: GMASettings):
@@ -101,16 +115,9 @@ class RealizationNLP:
         """``grad_c phi_hat`` (n_c,) from the multipliers: ``d/dc [phi + lam^T (y - c)] = -lam``."""
         return -res.lam_g[: self.problem.n_c]
 
-    @property
-    def last(self) -> NLPResult | None:
-        return self._nlp.last
-
-    @last.setter
-    def last(self, value: NLPResult | None) -> None:
-        self._nlp.last = value
 
 
-class ModifiedNLP:
+class ModifiedNLP(_WarmStarted):
     """The modified problem of GMA, all modifiers and safeguards as parameters.
 
     ``min_{u,s} phi(u) + lam^T d + 0.5 d^T diag(q) d + rho sum(s)``
@@ -160,10 +167,3 @@ class ModifiedNLP:
         x0 = np.r_[np.asarray(x0, float), np.zeros(n_g)]
         return self._nlp.solve(x0, p, lbx, ubx, lbg, ubg)
 
-    @property
-    def last(self) -> NLPResult | None:
-        return self._nlp.last
-
-    @last.setter
-    def last(self, value: NLPResult | None) -> None:
-        self._nlp.last = value
