@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 from . import graph
-from .graph import NodeProcess, close_graph, isolated_ros_env, stopped_by_signal
+from .graph import GraphRun, NodeProcess, isolated_ros_env, stopped_by_signal
 from .progress import Progress, eta_text
 
 __all__ = ["parse_args", "fly", "report", "main"]
@@ -62,8 +62,8 @@ def fly(args, env, out: Path, progress: Progress) -> dict:
     procs = []
     log = open(out / "nodes.log", "w")
     wall0 = time.monotonic()
-    code, interrupted = 1, False
-    try:
+    code = 1
+    with GraphRun(procs, rec, log, progress) as run:
         extra = start_recorder(args, log, env, rec, procs)
         ctrl = NodeProcess("controller", {}, log=log, env=env)
         procs.append(ctrl)
@@ -89,14 +89,9 @@ def fly(args, env, out: Path, progress: Progress) -> dict:
         while time.monotonic() < deadline:                  # the last lap message
             rclpy.spin_once(rec, timeout_sec=0.05)
         code = plant.proc.returncode
-    except (KeyboardInterrupt, RuntimeError) as exc:
-        if not stopped_by_signal(exc):
-            raise
-        interrupted, code = True, 130
-    finally:
-        progress.clear()
-        close_graph(procs, rec, log)
+    interrupted = run.interrupted
     if interrupted:
+        code = 130
         print(f"\ninterrupted: every node stopped (node output in {out / 'nodes.log'})", flush=True)
     recorder_summary(procs)
     return {"wall": time.monotonic() - wall0, "recorder": rec, "plant_exit": code, "interrupted": interrupted}

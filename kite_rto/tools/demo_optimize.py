@@ -12,7 +12,7 @@ from ..gma import HistoryStore
 from ..rto.experiment import default_wind_source
 from ..rto.settings import KiteRTOSettings
 from .demo_graph import plant_params, recorder_summary, ros_init, spin_until, start_recorder
-from .graph import NodeProcess, close_graph, stopped_by_signal
+from .graph import GraphRun, NodeProcess
 from .progress import OptimizeProgress
 from .recorder import Recorder
 from .rto_report import write_report
@@ -36,9 +36,9 @@ def optimize(args, env, out: Path, progress) -> int:
     log = open(out / "nodes.log", "a" if args.resume else "w")
     procs = []
     wall0 = time.monotonic()
-    code, interrupted = 1, False
+    code = 1
     tracker = OptimizeProgress(args.iterations, KiteRTOSettings().experiments_per_iteration())
-    try:
+    with GraphRun(procs, rec, log, progress) as run:
         extra = start_recorder(args, log, env, rec, procs)
         opt = NodeProcess("optimizer", {"db": str(db), "n_iter": args.iterations, "exit_when_done": True,
                                         "wind_source": default_wind_source(args.wind_model)}, log=log, env=env)
@@ -76,14 +76,9 @@ def optimize(args, env, out: Path, progress) -> int:
         code = opt.proc.returncode if opt.proc.poll() is not None else 1
         if code != 0:
             print(f"the optimizer exited with code {code}; see {out / 'nodes.log'}")
-    except (KeyboardInterrupt, RuntimeError) as exc:
-        if not stopped_by_signal(exc):
-            raise
-        interrupted, code = True, 130
-    finally:
-        progress.clear()
-        close_graph(procs, rec, log)
+    interrupted = run.interrupted
     if interrupted:
+        code = 130
         print(f"\ninterrupted: every node stopped. The optimizer's database {db} keeps every finished experiment; "
               f"--resume continues the run", flush=True)
     recorder_summary(procs)

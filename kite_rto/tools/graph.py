@@ -10,8 +10,8 @@ import sys
 import threading
 import time
 
-__all__ = ["NodeProcess", "isolated_ros_env", "node_command", "start_node", "start_process", "stop_node",
-           "stop_all", "close_graph", "stopped_by_signal"]
+__all__ = ["GraphRun", "NodeProcess", "isolated_ros_env", "node_command", "start_node", "start_process",
+           "stop_node", "stop_all", "close_graph", "stopped_by_signal"]
 
 SIGNALLED = False
 """Set by the demo's SIGINT/SIGTERM handler: an error raised inside rclpy after it is part of the stop, not a bug."""
@@ -162,3 +162,22 @@ def close_graph(procs, node, log) -> None:
     log.close()
     node.destroy_node()
     rclpy.try_shutdown()
+
+
+class GraphRun:
+    """``with GraphRun(procs, node, log, progress) as run:`` around a run of the graph: whatever happens, the
+    progress line is cleared and the graph closed (:func:`close_graph`); a stop by signal (Ctrl-C, SIGTERM) ends
+    the block quietly with ``run.interrupted = True``, any other error propagates."""
+
+    def __init__(self, procs, node, log, progress):
+        self.procs, self.node, self.log, self.progress = procs, node, log, progress
+        self.interrupted = False
+
+    def __enter__(self) -> "GraphRun":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        self.progress.clear()
+        close_graph(self.procs, self.node, self.log)
+        self.interrupted = exc is not None and stopped_by_signal(exc)
+        return self.interrupted
