@@ -11,11 +11,11 @@ answered by a fresh controller, kept if the restart is confirmed; the flying con
 readings, or readings stamped far from the last sample, are rejected with throttled warnings.
 
 Synchronization (``sync=True``): sample k is answered once the optimizer's sync message for it is in (the
-setpoints in force, applied first when its count of setpoint messages changed: the pure runner's order). It waits
-as long as an optimizer is in the graph (``sync_sources()`` > 0: publishers of /rto/sync), however long the
-optimizer takes, so the answer never depends on wall time; only when none has been in the graph for
-:data:`SYNC_ABSENT` s (it exited, or DDS dropped a killed or frozen one after its participant lease) is the sample
-answered unsynchronized, and from then on samples are answered at once until a sync message arrives again.
+setpoints in force, applied first when its count of setpoint messages changed: the pure runner's order). Once a
+sync message has arrived, every sample waits for its own, however long the optimizer takes (a restarted optimizer
+picks the loop up again): the answer never depends on wall time or on what the graph shows. Only a controller that
+has never heard from an optimizer answers unsynchronized, once no publisher of /rto/sync has been in the graph for
+:data:`SYNC_ABSENT` s (no optimizer at all), and from then on at once until a sync message arrives.
 """
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ from .sample_join import Place, RejectLog, Timeline, reading_error, state_values
 __all__ = ["SteeringLoop", "fmt_setpoints", "SYNC_ABSENT", "SETPOINTS_GRACE", "SETPOINTS_WAIT", "SYNC_NAMES"]
 
 SYNC_ABSENT = 1.0
-"""Wall s a sample waits for /rto/sync while no optimizer is in the graph before it is answered unsynchronized."""
+"""Wall s a sample waits, before any /rto/sync has arrived, while no optimizer is in the graph."""
 SYNC_WAIT_LOG = 10.0
 """Wall s between the log lines of a sample that waits for a slow optimizer."""
 SETPOINTS_GRACE, SETPOINTS_WAIT = 1.0, 3.0
@@ -341,16 +341,16 @@ class SteeringLoop:
             _keep(self._syncs, stamp, (vals[:3], vals[3]))
 
     def watchdog(self) -> None:
-        """Call periodically (the node: every 0.05 s): releases a held sample once no optimizer is in the graph."""
+        """Call periodically (the node: every 0.05 s): releases a held sample when there is no optimizer at all."""
         held = self._sync_held
         if held is None:
             return
         now = self._clock()
-        if self._sync_sources() > 0:
+        if self._sync_updates is not None or self._sync_sources() > 0:
             self._sync_seen = now
             if now - held[3] > SYNC_WAIT_LOG:
                 self.log.info(f"sample at {held[0] * 1e-9:.2f} s: waiting {now - held[3]:.0f} s for the optimizer's "
-                              "/rto/sync (the optimizer is in the graph)", throttle_duration_sec=SYNC_WAIT_LOG)
+                              "/rto/sync", throttle_duration_sec=SYNC_WAIT_LOG)
         elif now - max(held[3], self._sync_seen) > SYNC_ABSENT:
             self._release_unsynced(f"no optimizer in the graph for {SYNC_ABSENT:g} s")
 
