@@ -5,11 +5,13 @@
 * :class:`ModifiedNLP` -- the modified problem of GMA (SPEC §5) with trust region, convexification,
   back-off and optional soft constraints.
 
-Each wraps two IPOPT instances created at construction: a warm-started one (previous primal and dual
-solution, small barrier parameter) and a cold one used as a fallback when the warm solve fails.
+Each wraps two IPOPT instances: a warm-started one (previous primal and dual solution, small barrier parameter)
+and a cold one used as a fallback when the warm solve fails. Creating the four instances takes about 3 s (CasADi
+differentiates the NLPs), so :class:`NLPPair` creates them on first use, or ahead of it on a worker thread.
 """
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass
 
@@ -20,7 +22,7 @@ from .modifiers import Modifiers
 from .problem import ModelProblem
 from .settings import GMASettings
 
-__all__ = ["NLPResult", "RealizationNLP", "ModifiedNLP"]
+__all__ = ["NLPResult", "RealizationNLP", "ModifiedNLP", "NLPPair"]
 
 _WARM = {"warm_start_init_point": "yes", "warm_start_bound_push": 1e-9, "warm_start_slack_bound_push": 1e-9,
          "warm_start_mult_bound_push": 1e-9, "mu_init": 1e-5}
@@ -167,3 +169,27 @@ class ModifiedNLP(_WarmStarted):
         x0 = np.r_[np.asarray(x0, float), np.zeros(n_g)]
         return self._nlp.solve(x0, p, lbx, ubx, lbg, ubg)
 
+
+class NLPPair:
+    """GMA's :class:`RealizationNLP` and :class:`ModifiedNLP`, created together on first use.
+
+    :meth:`get` is thread-safe: a worker thread may call it ahead of need (:meth:`kite_rto.gma.GMA.prepare`)
+    while another thread that needs the NLPs waits for that build instead of starting a second one.
+    """
+
+    def __init__(self, problem: ModelProblem, settings: GMASettings):
+        self._args = (problem, settings)
+        self._lock = threading.Lock()
+        self._pair: tuple[RealizationNLP, ModifiedNLP] | None = None
+
+    def get(self) -> tuple[RealizationNLP, ModifiedNLP]:
+        """The two NLPs, created now (in this order) if they do not exist yet."""
+        with self._lock:
+            if self._pair is None:
+                self._pair = (RealizationNLP(*self._args), ModifiedNLP(*self._args))
+            return self._pair
+
+    @property
+    def built(self) -> bool:
+        """True once the NLPs exist."""
+        return self._pair is not None

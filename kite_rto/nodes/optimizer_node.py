@@ -16,6 +16,7 @@ import math
 import os
 import sys
 import threading
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
@@ -59,44 +60,62 @@ class OptimizerNode(Node):
         self.create_timer(1.0, self.publish_status, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.publish_status()
         # The NLP builds and the model's optimum and directions take seconds (10-14 s when nothing is cached): they
-        # run on a worker thread, so parameter services and the status answer from the first second.
+        # run on a worker thread, so parameter services and the status answer from the first second. Once GMA
+        # exists (its first experiment needs no NLP) the executor starts flying while the worker creates GMA's
+        # NLPs, which the first iteration's end needs (GMA.prepare; a thread that needs them earlier waits).
         self._built = None
         self._history = history
+        self._gma_ready = threading.Event()
         self._builder = threading.Thread(target=self._build, args=(history,), name="optimizer-build", daemon=True)
         self._builder.start()
         self._build_timer = self.create_timer(0.05, self._finish_start,
                                               clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def _build(self, history) -> None:
-        """Worker thread: the model's problem, optimum, directions and GMA (disk-cached where possible)."""
+        """Worker thread: the model's problem, optimum, directions and GMA (disk-cached where possible), then
+        GMA's NLPs."""
         try:
             s = self.settings
             ocp = KiteOCPSettings(h_min=s.experiment.h_min)
             for what, step in (("building the lap OCP", lambda: lap_problem(s.box, KiteParams(), ocp)),
                                ("solving for the model's optimum", lambda: model_only_optimum(s.box, KiteParams(), ocp)),
                                ("computing the privileged directions", lambda: s.gradient != "directional" or
-                                gma_directions(s, KiteParams(), ocp)),
-                               ("building GMA's NLPs", lambda: None)):
+                                gma_directions(s, KiteParams(), ocp))):
                 self.starting = f"starting: {what}"
                 step()
+            if history is not None:
+                self.starting = "starting: resuming GMA from the database"
             self._built = make_gma(s, history=history)
         except ValueError as err:       # e.g. more privileged directions than setpoints free to move on this box
             self._built = ParameterError(f"parameters gradient = {self.p['gradient']!r}, n_directions = "
                                          f"{self.p['n_directions']}: {err}")
         except Exception as err:  # noqa: BLE001 - reported and turned into a clean exit by _finish_start
             self._built = err
+        self._gma_ready.set()
+        if isinstance(self._built, GMA):
+            try:
+                t0 = time.perf_counter()
+                self._built.prepare()
+                self.get_logger().info(f"GMA's NLPs built in {time.perf_counter() - t0:.1f} s")
+            except Exception as err:  # noqa: BLE001 - the executor meets it again where it needs the NLPs
+                self.get_logger().error(f"building GMA's NLPs failed: {err!r}")
 
     def wait_until_started(self, timeout: float | None = None) -> bool:
         """Block until the start-up work is done and the run is set up (for a node used without spinning, e.g.
         composed in a test); True once :attr:`run` exists."""
-        self._builder.join(timeout)
-        if self.run is None and not self._builder.is_alive():
+        self._gma_ready.wait(timeout)
+        if self.run is None and self._gma_ready.is_set():
             self._finish_start()
         return self.run is not None
 
     def _finish_start(self) -> None:
-        """Executor thread: once the worker is done, subscribe, publish the first setpoints (or exit 2 on an error)."""
-        if self._builder.is_alive() or self.run is not None:
+        """Executor thread: once GMA exists, subscribe, publish the first setpoints (or exit 2 on an error)."""
+        if self.run is not None:
+            return
+        if not self._gma_ready.is_set():        # meanwhile, the phase four times a second (a new monitor sees it)
+            self._start_ticks = getattr(self, "_start_ticks", 0) + 1
+            if self._start_ticks % 5 == 0:
+                self.publish_status()
             return
         self._build_timer.cancel()
         built = self._built
