@@ -62,6 +62,10 @@ CASES = [
      ["parameter box_aspect = [0.22, 0.16]", "with low < high"]),
     ("untrackable optimizer box", "optimizer", ["-p", "box_aspect:=[0.10,0.22]"],
      ["box_aspect = [0.1, 0.22]", "trackable", "infeasible turn"]),
+    ("misspelt parameter name", "plant", ["-p", "w_reff:=20.0"],
+     ["unknown parameter w_reff = 20.0", "node plant has no such parameter", "did you mean w_ref?"]),
+    ("misspelt parameter in a params file", "controller", ["--params-file", "{typo_yaml}"],
+     ["unknown parameter k_pis = 3.0", "node controller has no such parameter", "did you mean k_psi?"]),
 ]
 
 
@@ -83,10 +87,13 @@ def test_cases_cover_every_node():
 def test_bad_parameter_stops_the_node(fault, node, args, needles, ros_env, tmp_path):
     bad_yaml = tmp_path / "bad.yaml"
     bad_yaml.write_text(CONFIG.read_text().replace("    w_ref: 8.0", "    w_ref: -8.0"))
-    subst = {"bad_yaml": str(bad_yaml), "missing": str(tmp_path / "missing")}
+    typo_yaml = tmp_path / "typo.yaml"
+    typo_yaml.write_text(CONFIG.read_text().replace("    k_psi:", "    k_pis:"))
+    subst = {"bad_yaml": str(bad_yaml), "typo_yaml": str(typo_yaml), "missing": str(tmp_path / "missing")}
     raw_args, args = args, [a.format(**subst) for a in args]
     needles = [n.format(**subst) for n in needles]
-    shown = {"bad_yaml": "bad.yaml (the shipped defaults with w_ref: -8.0)", "missing": "/missing-dir"}
+    shown = {"bad_yaml": "bad.yaml (the shipped defaults with w_ref: -8.0)",
+             "typo_yaml": "typo.yaml (the shipped defaults with k_psi written k_pis)", "missing": "/missing-dir"}
     injection = f"{node} --ros-args {' '.join(a.format(**shown) for a in raw_args)}"
     row = {"fault": f"bad parameter: {fault}", "injection": injection, "outcome": "", "experiments_lost": 0,
            "unsafe_setpoints": 0, "passed": False}

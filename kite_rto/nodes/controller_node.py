@@ -25,6 +25,7 @@ from ..flight.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, Setpo
 from ..flight.steering_loop import SteeringLoop, fmt_setpoints
 from ..kite.params import KiteParams, ParameterError
 from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
+from .peer_check import PlantAgreement
 from .parameters import ParamSpec, declare_params
 from .spin import run_node
 from .topics import LAPS, POSITION, REFERENCE_PATH, SETPOINTS, STATE, STEERING, SYNC, TENSION, WIND
@@ -66,6 +67,8 @@ PARAMS = (
     ParamSpec("z_ref", KiteParams.z_ref, "anemometer height (reference height of the model's wind profile)", 0.5,
               200.0, unit="m"),
 )
+PLANT_SHARED = ("dt", "r", "z_ref", "E", "g_s", "shear", "dead_time", "rate_limit")
+"""Parameters the plant has too: checked against the plant's when it appears (:mod:`.peer_check`)."""
 LAP_FIELDS = ("lap", "lap_time", "mean_tension", "min_altitude", "rms_cross_track_deg", "tension_coefficient",
               "theta_0", "A_phi", "A_theta")
 """Names of the /kite/laps JointState: lap index, s, N, m, deg, N/(m/s)^2, then the lap's projection (rad)."""
@@ -119,6 +122,8 @@ class ControllerNode(Node):
         if self.loop.sync:
             self.create_subscription(JointState, SYNC, self.sync_callback, RELIABLE_10)
             self.create_timer(0.05, self.loop.watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.plant_agreement = PlantAgreement(self, {n: float(v[n]) for n in PLANT_SHARED},
+                                              {s.name: s.unit for s in PARAMS})
         self.publish_path()
         self.get_logger().info(f"controller up: setpoints {fmt_setpoints(c0)}")
 

@@ -5,6 +5,7 @@ with rejection reasons that name parameter, value and what was expected.
 from __future__ import annotations
 
 import array
+import difflib
 import math
 from dataclasses import dataclass
 
@@ -115,7 +116,8 @@ def declare_params(node, specs, apply=None, cross_check=None) -> dict:
 
     Start-up: each parameter is declared with its descriptor (dynamic typing, so a wrong type reaches our
     check; ``read_only`` unless ``spec.runtime``), checked by :meth:`ParamSpec.check`, then ``cross_check(values)``
-    runs on all of them. Raises :class:`ParameterError` for the first bad value (``run_node``: exit code 2).
+    runs on all of them. Raises :class:`ParameterError` for the first bad value, or for a value given to a
+parameter the node does not have (a typo; ``run_node``: exit code 2).
 
     Running: a set-parameters request is checked the same way (then ``cross_check`` on the values it would leave)
     and, if every parameter is ``runtime`` and valid, ``apply(changes)`` is called (it must raise
@@ -138,10 +140,32 @@ def declare_params(node, specs, apply=None, cross_check=None) -> dict:
             raise
         s.check(value)
         values[s.name] = _normalized(s, value)
+    _refuse_unknown(node, specs)
     if cross_check is not None:
         cross_check(dict(values))
     _watch_params(node, {s.name: s for s in specs}, values, apply, cross_check)
     return values
+
+
+def _refuse_unknown(node, specs) -> None:
+    """Raise :class:`ParameterError` for a value given to ``node`` (``-p``, a params file) that it does not have.
+
+    rclpy silently ignores an override of an undeclared parameter, so a typo (``-p w_reff:=20.0``) would run with
+    the default. Parameters rclpy itself declares (``use_sim_time``, ...) and QoS overrides are accepted.
+    """
+    known = {s.name for s in specs}
+    unknown = sorted(n for n in node._parameter_overrides
+                     if n not in known and not node.has_parameter(n) and not n.startswith("qos_overrides."))
+    if not unknown:
+        return
+    name = unknown[0]
+    close = difflib.get_close_matches(name, sorted(known), n=1)
+    hint = f"did you mean {close[0]}?" if close else f"its parameters are: {', '.join(sorted(known))}"
+    value = node._parameter_overrides[name].value
+    value = value.tolist() if isinstance(value, array.array) else value
+    more = f" (also unknown: {', '.join(unknown[1:])})" if len(unknown) > 1 else ""
+    raise ParameterError(f"unknown parameter {name} = {value!r}: node {node.get_name()} has no such parameter; "
+                         f"{hint}{more}")
 
 
 def _normalized(spec: ParamSpec, value):
