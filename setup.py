@@ -21,14 +21,14 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "plant = kite_rto.nodes.plant_node:main",
-            "echo_pilot = kite_rto.nodes.echo_pilot:main",
-            "controller = kite_rto.nodes.controller_node:main",
-            "optimizer = kite_rto.nodes.optimizer_node:main",
+            "plant = kite_rto.nodes.entry:plant",
+            "echo_pilot = kite_rto.nodes.entry:echo_pilot",
+            "controller = kite_rto.nodes.entry:controller",
+            "optimizer = kite_rto.nodes.entry:optimizer",
             # operator tools (kite_ prefix: no clash with shell commands such as echo in a venv's bin/)
             "kite_monitor = kite_rto.tools.monitor:main",
             "kite_echo = kite_rto.tools.echo:main",
-            "kite_record = kite_rto.tools.record:main",
+            "kite_record = kite_rto.nodes.entry:kite_record",
             "kite_report = kite_rto.tools.rto_report:main",
             "kite_demo = kite_rto.tools.demo:main",
         ],

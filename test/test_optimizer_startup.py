@@ -56,6 +56,7 @@ def test_parameters_and_status_answer_while_the_optimizer_builds(tmp_path, monke
         assert node.wait_until_started(0)
     finally:
         release.set()
+        node._builder.join(300)     # its NLP build must not overlap the next test's CasADi work (not thread-safe)
         probe.executor.remove_node(node)
         node.destroy_node()
         probe.close()

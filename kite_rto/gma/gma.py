@@ -91,8 +91,11 @@ class GMA:
         return self._nlps.get()[1]
 
     def prepare(self) -> None:
-        """Create the two NLPs now (about 3 s for the kite) instead of at the first iteration's end; safe to call
-        from a worker thread while the first experiments run."""
+        """Create the two NLPs now (about 3 s for the kite) instead of at the first iteration's end.
+
+        It may run on a worker thread while the first experiments run, provided no other thread calls into CasADi
+        meanwhile: CasADi releases the GIL while it builds, and its symbolic objects are not thread-safe. GMA
+        itself only calls CasADi after ``prepare`` has returned (a thread that needs the NLPs waits for it)."""
         self._nlps.get()
 
     @property
@@ -259,6 +262,7 @@ class GMA:
 
     def _complete(self) -> IterationRecord:
         """Close iteration ``k``: gradients, modifiers, the modified problem, the filtered step, the record."""
+        self.prepare()          # before any CasADi call here: a worker thread may still be building the NLPs
         t0 = time.perf_counter()
         pr, s, k, c_k = self.problem, self.settings, self._k, self._c.copy()
         ordered = self._experiments_of(k)

@@ -37,6 +37,7 @@ from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to
 from .optimizer_params import PARAMS, cross_check, settings_from_params
 from .parameters import declare_params
 from .spin import request_exit, run_node
+from .stop_signals import STOP
 from .topics import CRASHES, POSITION, SETPOINTS, STATE, STATUS, SYNC, SYNC_NAMES, TENSION, WIND, WIND_ESTIMATE
 
 __all__ = ["OptimizerNode", "PARAMS", "main"]
@@ -66,6 +67,7 @@ class OptimizerNode(Node):
         self._built = None
         self._history = history
         self._gma_ready = threading.Event()
+        self._cancel = threading.Event()       # destroy_node: the worker stops at its next step
         self._builder = threading.Thread(target=self._build, args=(history,), name="optimizer-build", daemon=True)
         self._builder.start()
         self._build_timer = self.create_timer(0.05, self._finish_start,
@@ -81,6 +83,8 @@ class OptimizerNode(Node):
                                ("solving for the model's optimum", lambda: model_only_optimum(s.box, KiteParams(), ocp)),
                                ("computing the privileged directions", lambda: s.gradient != "directional" or
                                 gma_directions(s, KiteParams(), ocp))):
+                if self._cancel.is_set():
+                    return self._gma_ready.set()
                 self.starting = f"starting: {what}"
                 step()
             if history is not None:
@@ -92,7 +96,7 @@ class OptimizerNode(Node):
         except Exception as err:  # noqa: BLE001 - reported and turned into a clean exit by _finish_start
             self._built = err
         self._gma_ready.set()
-        if isinstance(self._built, GMA):
+        if isinstance(self._built, GMA) and not self._cancel.is_set():
             try:
                 t0 = time.perf_counter()
                 self._built.prepare()
@@ -231,6 +235,12 @@ class OptimizerNode(Node):
         self.pub_status.publish(msg)
 
     def destroy_node(self):
+        # The worker may be inside CasADi, which must not run concurrently with anything else touching CasADi
+        # (a test or a composed process going on): let it finish its current step (seconds) before going on,
+        # unless the process is stopping on a signal (run_node then ends it without waiting for the worker).
+        self._cancel.set()
+        if STOP.signum is None:
+            self._builder.join(120.0)
         self.store.close()
         return super().destroy_node()
 

@@ -12,14 +12,17 @@ import itertools
 import os
 import random
 import sys
+import threading
 import time
 
 import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 
 from ..kite.params import ParameterError
+from .stop_signals import STOP, StopSignals
 
 __all__ = ["EXECUTOR_ENV", "DELAY_ENV", "run_node", "request_exit"]
 
@@ -75,9 +78,9 @@ class _DelayedDelivery:
 def request_exit(node, code: int = 0) -> None:
     """Make the node's process exit with ``code`` once the current callback returns.
 
-    Under :func:`run_node`'s events executor loop this only sets a flag (an exception escaping a callback would be
-    logged as FATAL by the C++ executor); under ``rclpy.spin(node)`` or any other executor it raises
-    :class:`SystemExit`, which propagates out of the spin call as before. Callbacks should return right after it.
+    Under :func:`run_node`'s spin loop this only sets a flag (an exception escaping a callback would be logged as
+    FATAL by the C++ executor); under ``rclpy.spin(node)`` or any other executor it raises :class:`SystemExit`,
+    which propagates out of the spin call as before. Callbacks should return right after it.
     """
     if getattr(node, "_kite_run_loop", False):
         node._kite_exit_code = code
@@ -96,17 +99,17 @@ def _events_executor(context):
     return EventsExecutor(context=context)
 
 
-def _spin_events(node, executor) -> int:
+def _spin(node, executor, stop: StopSignals) -> int:
     # The Jazzy backport's ``EventsExecutor.spin()`` holds the GIL while it waits and did not dispatch timers on
     # these machines (signals and other threads starve); ``spin_once`` with a timeout works: the GIL is released
-    # while waiting, timers (also STEADY_TIME ones) fire, Ctrl-C raises KeyboardInterrupt here.
+    # while waiting, timers (also STEADY_TIME ones) fire, and a stop signal is seen within 0.25 s.
     node._kite_run_loop = True
     node._kite_exit_code = None
     executor.add_node(node)
     ok = node.context.ok
     spin_once = executor.spin_once
     try:
-        while ok():
+        while ok() and stop.signum is None:
             spin_once(timeout_sec=0.25)
             if node._kite_exit_code is not None:
                 return node._kite_exit_code
@@ -125,8 +128,19 @@ def run_node(factory, args=None, *, events: bool = False) -> int:
     the node is spun by rclpy's C++ events executor (several times less overhead per callback than the
     SingleThreadedExecutor; no coroutine callbacks), unless ``KITE_RTO_EXECUTOR=single`` is set or it is not
     available; the node should then end with :func:`request_exit` rather than raising ``SystemExit``.
+    SIGINT (Ctrl-C) and SIGTERM stop it cleanly between callbacks with exit code 0 (:mod:`.stop_signals`); a
+    second signal while it stops interrupts whatever it is doing (exit code 130). A worker thread still inside
+    native code (e.g. a CasADi build) cannot be interrupted: once the node is destroyed and rclpy shut down, the
+    process then ends without waiting for it (``os._exit``: the interpreter's finalization would crash it).
     """
-    rclpy.init(args=args)
+    if _wants_help(args if args is not None else sys.argv[1:]):
+        print(_usage(factory), end="")
+        return 0
+    stop = STOP
+    stop.install()
+    if stop.signum is not None:                # stopped during the imports
+        return 0
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     code = 0
     try:
@@ -139,24 +153,54 @@ def run_node(factory, args=None, *, events: bool = False) -> int:
             node.get_logger().warning(f"{DELAY_ENV}: every received message is delivered after a random delay of "
                                       f"up to {delays.max_s * 1e3:g} ms (load test)")
         executor = _events_executor(node.context) if events else None
-        if executor is not None:
-            code = _spin_events(node, executor)
-        else:
-            rclpy.spin(node)
+        code = _spin(node, executor if executor is not None else SingleThreadedExecutor(context=node.context), stop)
+        if stop.signum is not None:
+            node.get_logger().info(f"{stop.name}: stopping")
     except ParameterError as exc:
         print(f"[kite_rto] refusing to start: {exc}", file=sys.stderr, flush=True)
         code = 2
-    except (KeyboardInterrupt, ExternalShutdownException):
+    except KeyboardInterrupt:
+        code = 130 if stop.signum is not None else 0
+    except ExternalShutdownException:
         pass
-    except RuntimeError:
-        if rclpy.ok():
-            raise
-        # Ctrl-C shut rclpy down while a call into it was in flight: rclpy's C++ layer then raises a RuntimeError
-        # (pybind11 "Unable to convert call argument ...") instead of ExternalShutdownException. A clean stop.
     except SystemExit as exc:
         code = exc.code if isinstance(exc.code, int) else 0
     finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        try:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+        except KeyboardInterrupt:
+            code = 130
+        stop.restore()
+    if any(t.daemon and t.is_alive() for t in threading.enumerate() if t is not threading.main_thread()):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
     return code
+
+
+def _wants_help(argv) -> bool:
+    """``-h``/``--help`` before any ``--ros-args``."""
+    argv = list(argv)
+    if "--ros-args" in argv:
+        argv = argv[:argv.index("--ros-args")]
+    return any(a in ("-h", "--help") for a in argv)
+
+
+def _usage(factory) -> str:
+    """Usage text of a node: how to start it and its parameters (from the module's ``PARAMS`` when it has one)."""
+    module = sys.modules.get(getattr(factory, "__module__", ""), None)
+    spec = getattr(module, "__spec__", None)
+    name = (spec.name if spec is not None else getattr(module, "__name__", "node")).rsplit(".", 1)[-1]
+    name = name.removesuffix("_node")
+    doc = (getattr(module, "__doc__", "") or "").strip().splitlines()
+    lines = [f"usage: {name} [--ros-args -p NAME:=VALUE ... --params-file FILE]", ""]
+    if doc:
+        lines += [doc[0], ""]
+    params = getattr(module, "PARAMS", ())
+    if params:
+        lines.append("parameters (NAME default: description; allowed values):")
+        lines += [f"  {p.name} {p.default!r}: {p.doc}; {p.expected()}" for p in params]
+    lines += ["", "The full table: docs/parameters.md; a params file: config/kite_rto.yaml."]
+    return "\n".join(lines) + "\n"

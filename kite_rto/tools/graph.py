@@ -16,8 +16,7 @@ __all__ = ["GraphRun", "NodeProcess", "isolated_ros_env", "node_command", "start
 SIGNALLED = False
 """Set by the demo's SIGINT/SIGTERM handler: an error raised inside rclpy after it is part of the stop, not a bug."""
 
-MODULES = {"plant": "kite_rto.nodes.plant_node", "controller": "kite_rto.nodes.controller_node",
-           "optimizer": "kite_rto.nodes.optimizer_node", "echo_pilot": "kite_rto.nodes.echo_pilot"}
+from ..nodes.entry import MODULES  # noqa: E402  (executable name -> module)
 _PR_SET_PDEATHSIG = 1
 
 
@@ -41,7 +40,7 @@ def _die_with_parent():
 
 def node_command(name: str, params: dict | None = None) -> list[str]:
     """The command line of ``ros2 run kite_rto <name> --ros-args -p k:=v ...`` for this interpreter."""
-    cmd = [sys.executable, "-m", MODULES[name], "--ros-args"]
+    cmd = [sys.executable, "-m", "kite_rto.nodes.entry", name, "--ros-args"]
     for k, v in (params or {}).items():
         cmd += ["-p", f"{k}:={str(v).lower() if isinstance(v, bool) else v}"]
     return cmd

@@ -19,7 +19,6 @@ import argparse
 import importlib
 import os
 import re
-import signal
 import sys
 import time
 
@@ -319,9 +318,8 @@ def main(argv=None) -> int:
     except OSError as exc:
         print(f"kite_record: cannot write {args.out}: {exc}", file=sys.stderr)
         return 1
-    # Ctrl-C / SIGTERM: rclpy's handlers shut the context down and the spin loop ends between two messages; this
-    # Python-level handler only keeps KeyboardInterrupt from landing in the middle of an MCAP write.
-    signal.signal(signal.SIGINT, lambda *_: print("[kite_record] stopping", file=sys.stderr, flush=True))
+    # Ctrl-C / SIGTERM: run_node's handlers (kite_rto.nodes.stop_signals) end the spin loop between two messages,
+    # never in the middle of an MCAP write; the recording is then closed by destroy_node.
     return run_node(lambda: _make_node(args), ["kite_record", *argv], events=True)
 
 
