@@ -12,18 +12,32 @@ own disk-full error raised inside the write transaction, which SQLite rolls back
 SQLITE_FULL ends the same way) at an experiment write and at an iteration write, then restarted.
 """
 import hashlib
+import math
 import os
+import re
 import subprocess
+import time
 
 import numpy as np
 import pytest
+from sensor_msgs.msg import JointState
 
 import kite_rto.gma.gma as gma_module
+from kite_rto.flight.shape import setpoints_from_shape
 from kite_rto.gma import History, HistoryStore
 from kite_rto.gma.store_fault import DiskFull
+from kite_rto.nodes.interface import LATCHED, stamp_to_ns
+from kite_rto.nodes.optimizer_params import PARAMS, run_settings
+from kite_rto.rto.builder import make_gma
+from kite_rto.rto.experiment import ExperimentSpec
 from kite_rto.rto.run_db import SETTINGS_KEY, RunDatabaseError, open_run_database, settings_differences
+from kite_rto.rto.settings import KiteRTOSettings
+from kite_rto.tools.graph import node_command
 
+from faultgraph import QUIET, SHORT, node, stop_all
+from faultgraph import unsafe as outside_box
 from faultlog import fault_row
+from rosutil import Probe
 from storage_flight import Flight, compare
 
 pytestmark = [pytest.mark.faults]
@@ -204,13 +218,11 @@ def test_open_resumes_an_older_file_with_a_note(tmp_path, reference):
 # ---------------------------------------------------------------------------------------- node: start-up (exit 2)
 def node_defaults() -> dict:
     """The optimizer's run settings for its default parameters (what a default node stores with a new run)."""
-    from kite_rto.nodes.optimizer_params import PARAMS, run_settings
     return run_settings({s.name: s.default for s in PARAMS})
 
 
 def start_optimizer(db, env, *args, timeout=300):
     """``optimizer --ros-args -p db:=DB ARGS``, run to its end; (exit code, output)."""
-    from kite_rto.tools.graph import node_command
     res = subprocess.run(node_command("optimizer", {"db": str(db)}) + list(args), env=env, capture_output=True,
                          text=True, timeout=timeout, cwd=os.path.dirname(db))
     return res.returncode, res.stdout + res.stderr
@@ -283,3 +295,85 @@ def test_resume_with_changed_settings_is_refused(request, ros_env, tmp_path):
                      "gradient = 'directional' (stored) vs 'forward' (now)",
                      "box_aspect = [0.16, 0.22] (stored) vs [0.16, 0.21] (now)", str(db)):
             assert part in out, (part, out)
+
+
+# ---------------------------------------------------------------------------------- node: disk full in the graph
+@pytest.fixture
+def probe():
+    p = Probe()
+    yield p
+    p.close()
+
+
+def log_wall(line: str) -> float:
+    """The wall-clock stamp (s) of a ROS log line ``[LEVEL] [seconds] [node]: ...``."""
+    m = re.match(r"\[\w+\] \[(\d+\.\d+)\]", line)
+    return float(m.group(1)) if m else math.nan
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_disk_full_in_the_graph_then_restart(request, probe, ros_env, tmp_path):
+    """Optimizer 1: the disk fills at its 2nd experiment write and stays full; optimizer 2 (restarted): at its first
+    iteration write; optimizer 3: no fault. Plant and controller fly on throughout. Each faulty optimizer must hold
+    its setpoints, log the error (file and cause), stop with exit 3 after storage_timeout (3 s), and publish no
+    setpoint after the failed write; the last one completes the iteration with each experiment stored once."""
+    db = tmp_path / "rto.sqlite"
+    sent = []                                                  # (header stamp s, setpoints rad) of /rto/setpoints
+    probe.node.create_subscription(JointState, "/rto/setpoints", lambda m: sent.append(
+        (stamp_to_ns(m.header.stamp) * 1e-9, np.array(m.position, dtype=float))), LATCHED)
+    params = {"db": str(db), **SHORT, "storage_timeout": 3.0}
+    faults = [("experiment:2", "its 2nd experiment write"), ("iteration:1", "its first iteration write"), (None, "")]
+    procs, runs, err = [], [], None
+    try:
+        for i, (spec, _) in enumerate(faults):
+            env = dict(ros_env, **({"KITE_RTO_TEST_STORE_FULL": spec} if spec else {}))
+            opt = node(f"optimizer{i + 1}", "optimizer", env, tmp_path, params)
+            procs.append(opt)
+            if i == 0:
+                assert probe.spin_until(lambda: probe.node.count_publishers("/rto/setpoints") > 0, 180.0), opt.text()
+                procs.append(node("controller", "controller", ros_env, tmp_path))
+                assert probe.spin_until(lambda: probe.node.count_publishers("/kite/steering") > 0, 60.0)
+                procs.append(node("plant", "plant", ros_env, tmp_path, {**QUIET, "wait_subscribers": 2}))
+            assert probe.spin_until(lambda: not opt.alive(), 900.0), f"optimizer{i + 1} did not finish"
+            ended = time.time()
+            store = HistoryStore(db)
+            runs.append({"code": opt.proc.returncode, "proc": opt, "ended": ended, "counts": store.counts()})
+            store.close()
+    except BaseException as exc:                               # still write the rows (failed), then re-raise
+        err = exc
+    finally:
+        stop_all(procs)
+    store = HistoryStore(db)
+    history, counts = store.load(), store.counts()
+    store.close()
+    planned = make_gma(KiteRTOSettings(experiment=ExperimentSpec(n_laps=1, settle_laps=0))).history.pending
+    flown = {q.request_id: q for q, _ in history.experiments} if history else {}
+    lost = sum(q.request_id not in flown for q in planned) + (1 - min(counts["iterations"], 1))
+    allowed = [q.c for q in planned] + ([r.c_next for r in history.iterations] if history else [])
+    allowed = [setpoints_from_shape(x) for x in allowed]
+    for i, (spec, where) in enumerate(faults[:2]):
+        with fault_row(request, f"disk full at {spec.split(':')[0]} write, then restart",
+                       f"optimizer {i + 1}: KITE_RTO_TEST_STORE_FULL={spec} (writes fail like a full disk from "
+                       f"{where} on), storage_timeout 3 s; then restarted on the same database") as row:
+            if err is not None:
+                raise err
+            run = runs[i]
+            out = run["proc"].text()
+            failed = [ln for ln in run["proc"].lines if f"cannot write {db}: database or disk is full" in ln]
+            t_fail = log_wall(failed[0]) if failed else math.inf
+            after = [c for t, c in sent if t_fail <= t <= run["ended"]]        # published after the failed write
+            bad = len(after) + sum(outside_box(c) or not any(np.allclose(c, a, atol=1e-12) for a in allowed)
+                                   for _, c in sent)
+            row.outcome = (f"exit {run['code']} after holding its setpoints; database then: {run['counts']}; "
+                           f"{len(after)} setpoints published after the failed write; the last optimizer finished "
+                           f"the iteration: {counts['experiments']} experiments, {counts['iterations']} iteration, "
+                           f"{len(history.experiments) - len(flown)} duplicated")
+            row.experiments_lost, row.unsafe_setpoints = lost, bad
+            assert run["code"] == 3 and failed and "Traceback" not in out, out[-3000:]
+            assert "stopping" in out and "storage_timeout" in out, out[-3000:]
+            assert bad == 0 and lost == 0, (after, sent)
+    assert runs[0]["counts"] == {"experiments": 1, "iterations": 0}
+    assert runs[1]["counts"] == {"experiments": 2, "iterations": 0}
+    assert runs[2]["code"] == 0 and counts == {"experiments": PER, "iterations": 1}, runs[2]["proc"].text()[-3000:]
+    assert [q.request_id for q, _ in history.experiments] == [q.request_id for q in planned]
