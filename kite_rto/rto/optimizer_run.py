@@ -193,6 +193,7 @@ class OptimizerRun:
         have passed since the first failure, a failed try ends the run (:meth:`_give_up`)."""
         exps, recs = self._unstored()
         if not exps and not recs and self._start_stored:
+            self._scan_exp, self._scan_rec = len(self.gma.history.experiments), len(self.gma.records)
             return True
         now = self._clock()
         if self._failing_since is not None and now - self._last_try < RETRY_PERIOD:
