@@ -13,9 +13,10 @@ from .offline import run_offline
 from .problem import ModelProblem
 from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
 from .settings import GMASettings
-from .store import HistoryStore
+from .store import HistoryStore, StoreError
 
-__all__ = ["HistoryStore", "ModelProblem", "GMASettings", "GMA", "ModelRealization", "Modifiers", "Decision",
+__all__ = ["HistoryStore", "StoreError",
+           "ModelProblem", "GMASettings", "GMA", "ModelRealization", "Modifiers", "Decision",
            "GradientEstimator", "GradientEstimate", "PlantPoint", "FiniteDifferenceGradient", "LeastSquaresGradient",
            "DirectionalGradient", "PrivilegedDirections", "privileged_directions", "lagrangian_gradient",
            "ExperimentRequest", "ExperimentResult", "IterationRecord", "History", "run_offline"]

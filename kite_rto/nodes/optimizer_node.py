@@ -9,6 +9,12 @@ After each plant sample it has processed it publishes ``/rto/sync`` (sensor_msgs
 time: the setpoints in force, rad, and ``updates``, the number of setpoint messages this optimizer has published). A
 controller started with ``sync_optimizer:=true`` answers a sample only after its sync message, so in lockstep a
 setpoint change takes effect at the same sample as in the pure runner and the graph flies the same sequence.
+
+Storage (docs/storage.md): a damaged database, one that holds a run while ``resume`` is false, or one made with other
+settings stops the node at start-up with exit code 2 (the file untouched); a database that stays unwritable for
+``storage_timeout`` s stops it with exit code 3 (:data:`STORAGE_EXIT`), nothing stored lost. Test hook:
+``KITE_RTO_TEST_STORE_FULL=KIND:N[:ATTEMPTS]`` (:data:`STORE_FULL_ENV`) makes the database's writes fail like a
+full disk (:class:`~kite_rto.gma.store_fault.DiskFull`).
 """
 from __future__ import annotations
 
@@ -26,21 +32,29 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
 from ..flight.path import Setpoints
-from ..flight.shape import setpoints_from_shape
-from ..gma import GMA, HistoryStore
+from ..gma import GMA
+from ..gma.store_fault import DiskFull
 from ..kite.params import KiteParams, ParameterError
 from ..rto.builder import gma_directions, lap_problem, make_gma, model_only_optimum
 from ..rto.ocp import KiteOCPSettings
 from ..rto.optimizer_run import OptimizerRun
+from ..rto.run_db import SETTINGS_KEY, RunDatabaseError, open_run_database
 from ..rto.session import RTOSession
 from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
-from .optimizer_params import PARAMS, cross_check, settings_from_params
+from .optimizer_params import PARAMS, cross_check, run_settings, settings_from_params
 from .parameters import declare_params
 from .spin import request_exit, run_node
 from .stop_signals import STOP
 from .topics import CRASHES, POSITION, SETPOINTS, STATE, STATUS, SYNC, SYNC_NAMES, TENSION, WIND, WIND_ESTIMATE
 
-__all__ = ["OptimizerNode", "PARAMS", "main"]
+__all__ = ["OptimizerNode", "PARAMS", "STORAGE_EXIT", "STORE_FULL_ENV", "main"]
+
+STORAGE_EXIT = 3
+"""Exit code of an optimizer that could not write its database for ``storage_timeout`` s."""
+
+STORE_FULL_ENV = "KITE_RTO_TEST_STORE_FULL"
+"""Test hook ``KIND:N[:ATTEMPTS]``: the database's writes fail like a full disk (see DiskFull.parse)."""
+
 
 class OptimizerNode(Node):
     """Runs GMA experiments on the flying kite and publishes setpoints and status."""
@@ -53,12 +67,22 @@ class OptimizerNode(Node):
             raise ParameterError(f"parameter db = {v['db']!r}: expected a file in an existing directory "
                                  f"({db_dir} is not one)")
         self.settings = settings_from_params(v)
-        self.store = HistoryStore(v["db"])
-        history = self.store.load() if v["resume"] else None
+        try:
+            fault = DiskFull.parse(os.environ[STORE_FULL_ENV]) if os.environ.get(STORE_FULL_ENV) else None
+            self.store, history, note = open_run_database(v["db"], run_settings(v), v["resume"], fault=fault)
+        except RunDatabaseError as err:
+            raise ParameterError(str(err)) from None
+        except ValueError as err:
+            raise ParameterError(f"{STORE_FULL_ENV} = {os.environ[STORE_FULL_ENV]!r}: {err}") from None
+        if note:
+            self.get_logger().warning(note)
+        if fault is not None:
+            self.get_logger().warning(f"{STORE_FULL_ENV} = {os.environ[STORE_FULL_ENV]}: writes to {v['db']} "
+                                      f"fail like a full disk from {fault.kind} write {fault.nth} on (test hook)")
         self.run = None                        # the GMA run, once built (see _build)
         self.starting = "starting"             # what the start-up is doing (``/rto/status`` phase meanwhile)
         self.pub_status = self.create_publisher(DiagnosticArray, STATUS, RELIABLE_10)
-        self.create_timer(1.0, self.publish_status, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.create_timer(1.0, self._every_second, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.publish_status()
         # The NLP builds and the model's optimum and directions take seconds (10-14 s when nothing is cached): they
         # run on a worker thread, so parameter services and the status answer from the first second. Once GMA
@@ -130,8 +154,6 @@ class OptimizerNode(Node):
             self.get_logger().fatal(f"start-up failed: {built!r}")
             return request_exit(self, 1)
         self.gma, v, history = built, self.p, self._history
-        if history is None:
-            self.store.save_history(self.gma.history)
         self.pub_setpoints = self.create_publisher(JointState, SETPOINTS, LATCHED)
         self.pub_sync = self.create_publisher(JointState, SYNC, MEASUREMENTS)
         self.pub_wind_estimate = self.create_publisher(Vector3Stamped, WIND_ESTIMATE, MEASUREMENTS)
@@ -139,7 +161,9 @@ class OptimizerNode(Node):
         self.run = OptimizerRun(self.gma, RTOSession(self.gma, self.settings.experiment, self.settings.max_repeats),
                                 self.store, self.settings.box.setpoint_box(), n_iter=v["n_iter"],
                                 logger=self.get_logger(), send_setpoints=self.publish_setpoints,
-                                sync=self.publish_sync, status=self.publish_status, finished=self.finished)
+                                sync=self.publish_sync, status=self.publish_status, finished=self.finished,
+                                storage_lost=lambda: request_exit(self, STORAGE_EXIT),
+                                storage_timeout=v["storage_timeout"], run_meta={SETTINGS_KEY: run_settings(v)})
         self.session = self.run.session
         self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10)
         self.create_subscription(WrenchStamped, TENSION, self.tension_callback, RELIABLE_10)
@@ -150,7 +174,7 @@ class OptimizerNode(Node):
         if history is not None:
             self.get_logger().info(f"resumed from {v['db']}: {len(history.experiments)} experiments, "
                                    f"{len(history.iterations)} iterations")
-        self.run.setpoints(setpoints_from_shape(first.c))
+        self.run.begin()                     # stores a new run's start first; publishes nothing until it is stored
         self.get_logger().info(f"optimizer up: first experiment {first.request_id}")
 
     def apply_params(self, changes: dict) -> None:
@@ -221,13 +245,20 @@ class OptimizerNode(Node):
         msg.position = [*self.run.c_published, float(self.run.updates)]
         self.pub_sync.publish(msg)
 
+    def _every_second(self) -> None:
+        """Steady 1 Hz: retry a failed database write (also when no sample comes), then the status."""
+        if self.run is not None:
+            self.run.tick()
+        self.publish_status()
+
     def publish_status(self) -> None:
         st = DiagnosticStatus(name="kite_rto/optimizer", hardware_id="kite_rto")
         if self.run is None:
             st.level, st.message = DiagnosticStatus.OK, self.starting
             st.values = [KeyValue(key="phase", value=self.starting)]
         else:
-            st.level = DiagnosticStatus.ERROR if self.session.stopped else DiagnosticStatus.OK
+            st.level = DiagnosticStatus.ERROR if self.session.stopped or self.run.storage_error \
+                else DiagnosticStatus.OK
             st.message = self.run.phase
             st.values = [KeyValue(key=k, value=str(v)) for k, v in self.run.status_values().items()]
         msg = DiagnosticArray(status=[st])

@@ -12,14 +12,17 @@ from ..rto.settings import KiteRTOSettings
 from ..rto.wind_source import WIND_SOURCES
 from .parameters import ParamSpec
 
-__all__ = ["PARAMS", "cross_check", "settings_from_params"]
+__all__ = ["PARAMS", "RUN_INDEPENDENT", "cross_check", "run_settings", "settings_from_params"]
 
 _S = KiteRTOSettings()
 _E = _S.experiment
 PARAMS = (
     ParamSpec("db", "rto.sqlite", "SQLite file of experiments and iterations (resume source), in an existing "
               "directory"),
-    ParamSpec("resume", True, "continue from the database if it holds a run"),
+    ParamSpec("resume", True, "continue from the database if it holds a run (false: refuse a database that holds "
+              "one; a run's settings must match the stored ones to resume it)"),
+    ParamSpec("storage_timeout", 60.0, "wall time the optimizer holds its setpoints and retries when it cannot "
+              "write the database (disk full, I/O error) before it stops with exit code 3", 1.0, 86400.0, unit="s"),
     ParamSpec("n_iter", 10, "GMA iterations to run, then hold the last setpoints (0 = no limit)", 0, 10000,
               unit="iterations", runtime=True),
     ParamSpec("exit_when_done", False, "exit (code 0) once n_iter iterations are done (needs n_iter > 0)",
@@ -55,6 +58,16 @@ PARAMS = (
     ParamSpec("box_aspect", list(_S.box.aspect), "optimizer's aspect range [low, high], aspect = A_theta / "
               "sqrt(sin theta_0 A_phi); every point of the box must be trackable", 0.01, 2.0, unit="dimensionless"),
 )
+
+
+RUN_INDEPENDENT = ("db", "resume", "storage_timeout", "n_iter", "exit_when_done")
+"""Parameters that do not change what a stored experiment or iteration means (every other one is stored with a
+new run and must match to resume it)."""
+
+
+def run_settings(v: dict) -> dict:
+    """The parameter values a run is created with and resumed only with (name -> value)."""
+    return {s.name: v[s.name] for s in PARAMS if s.name not in RUN_INDEPENDENT}
 
 
 def cross_check(v: dict) -> None:

@@ -4,21 +4,35 @@
 :class:`~kite_rto.rto.session.RTOSession` (the same per-sample logic as the pure runner), writes every finished
 experiment and iteration to a :class:`~kite_rto.gma.HistoryStore`, and reports through callbacks:
 ``send_setpoints(c)`` (checked setpoints, rad), ``sync(stamp_ns)`` after each processed sample, ``status()`` when
-the status changed, ``finished()`` once ``n_iter`` iterations are done. :class:`kite_rto.nodes.optimizer_node`
-turns these into messages.
+the status changed, ``finished()`` once ``n_iter`` iterations are done, ``storage_lost()`` when the database stayed
+unwritable for ``storage_timeout`` s. :class:`kite_rto.nodes.optimizer_node` turns these into messages.
+
+Nothing is lost when storage fails. What GMA holds in memory and the store lacks is written in one transaction (a
+run's start; finished experiments; the experiment that completes an iteration together with that iteration's
+record and the next requests) before any setpoint that follows from it is published. When that write fails, the
+run keeps everything in memory, holds the setpoints in force (the plant flies them; their measurements are not
+used), and tries again at the next sample (at most every :data:`RETRY_PERIOD` s) and on :meth:`OptimizerRun.tick`;
+once stored, the held experiment starts from that sample. After ``storage_timeout`` s of failed writes it gives up
+(``storage_lost``). What is stored is compared with memory by request id and iteration number, so an iteration
+that GMA completes again on resume (its last experiment stored, its record not) is written too.
 """
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 
 from ..flight.path import SetpointError, validate_setpoints
 from ..flight.shape import setpoints_from_shape
 from ..flight.sample_join import RejectLog, SampleJoin, reading_error, state_values
+from ..gma import StoreError
 from ..kite.params import KiteParams
 
-__all__ = ["OptimizerRun", "shape_degrees", "vector_text"]
+__all__ = ["OptimizerRun", "RETRY_PERIOD", "shape_degrees", "vector_text"]
+
+RETRY_PERIOD = 0.5
+"""Wall seconds between two tries of a failed write (at the next sample after it, or at the next tick)."""
 
 
 def shape_degrees(x) -> str:
@@ -32,17 +46,32 @@ def vector_text(v) -> str:
 
 
 class OptimizerRun:
-    """GMA on the flying kite, one plant reading at a time; ``logger`` has ``info``/``warning``/``error``."""
+    """GMA on the flying kite, one plant reading at a time; ``logger`` has ``info``/``warning``/``error``.
 
-    def __init__(self, gma, session, store, box, *, n_iter: int, logger, send_setpoints, sync, status, finished):
+    ``run_meta``: run data written with a new run's start (e.g. the settings it was created with);
+    ``storage_timeout``: wall seconds of failed writes after which the run gives up (``storage_lost()``);
+    ``clock``: wall time in s (monotonic), for the retry period and the timeout.
+    """
+
+    def __init__(self, gma, session, store, box, *, n_iter: int, logger, send_setpoints, sync, status, finished,
+                 storage_lost=lambda: None, storage_timeout: float = 60.0, run_meta: dict | None = None,
+                 clock=time.monotonic):
         self.gma, self.session, self.store, self.box = gma, session, store, box
         self.n_iter = n_iter
         self.log = logger
         self._send, self._sync, self._status, self._finished = send_setpoints, sync, status, finished
+        self._storage_lost, self.storage_timeout, self._clock = storage_lost, float(storage_timeout), clock
         self.reject = RejectLog(logger)
         self.join = SampleJoin()
-        self._saved_exp = len(gma.history.experiments)
-        self._saved_rec = len(gma.records)
+        self._stored_ids, self._stored_ks = store.stored_keys()   # what the store holds, not what memory holds
+        self._start_stored = store.has_run()
+        self._run_meta = dict(run_meta or {})
+        self._scan_exp = self._scan_rec = 0     # everything before these indices of the history is stored
+        self._failing_since = None              # clock time of the first failed write of what is unstored
+        self._last_try = -math.inf
+        self.storage_error = ""                 # the last write error while something is unstored
+        self._held = False                      # the session moved on while its records were unstored
+        self._held_new = None                   # ... and asked for these setpoints (rad), applied once stored
         self.c_published = None             # setpoints of the last message sent (rad)
         self.updates = 0                    # setpoint messages sent by this process
         self._crashes_seen = 0              # last crash count of the current plant
@@ -50,6 +79,19 @@ class OptimizerRun:
         self._started = False
         self.done = False
         self.phase = "waiting for the plant"
+
+    def begin(self) -> None:
+        """Store what memory holds and the store lacks (a new run's start; an iteration GMA completed again on
+        resume), then publish the first experiment's setpoints; while that write fails nothing is published (the
+        first sample after it succeeds starts the run)."""
+        if self._store():
+            self.setpoints(setpoints_from_shape(self.gma.next_request().c))
+
+    def tick(self) -> None:
+        """Wall-clock timer (the node: 1 Hz): retry a failed write and check ``storage_timeout`` even when no
+        sample arrives."""
+        if self._failing_since is not None and not self.done:
+            self._store()
 
     # ------------------------------------------------------------ measurements
     def state_reading(self, stamp: int, names, position, velocity) -> None:
@@ -96,6 +138,14 @@ class OptimizerRun:
     def on_sample(self, m) -> None:
         if self.done:
             return
+        if self._failing_since is not None and not self._store():
+            return                          # records unstored: the held setpoints fly, nothing is measured
+        if self._held:                      # stored at last: what the session asked for starts now
+            self._held = False
+            self._started = True
+            self.phase = "experiment"
+            self._advance(self._held_new, m.t, restart=True)
+            return
         if not self._started:
             self._started = True
             if self.session.request is None:
@@ -110,7 +160,14 @@ class OptimizerRun:
             self.log.warning(f"experiment {request.request_id} invalid (kite crashed or no lap) at "
                              f"t = {m.t:.2f} s: its data is discarded, repeating it "
                              f"({self.session.repeats}/{self.session.max_repeats})")
-        self._persist()
+        if not self._store():
+            self._held, self._held_new = True, new
+            return
+        self._advance(new, m.t)
+
+    def _advance(self, new, t: float, restart: bool = False) -> None:
+        """Go on after a sample whose records are stored: stop, finish, or apply the ``new`` setpoints (rad); with
+        ``restart`` the session's experiment (started while they were held) starts again at ``t`` s."""
         if self.session.stopped:
             self.phase = f"failed: {self.session.message}"
             self.log.error(self.phase)
@@ -119,20 +176,75 @@ class OptimizerRun:
             self.finish()
         elif new is not None:
             self.setpoints(new)
+            if restart and not self.done:
+                self.session.evaluator.start(t, self.session.c)
 
-    def _persist(self) -> None:
-        exps = self.gma.history.experiments
-        for req, res in exps[self._saved_exp:]:
-            self.store.save_experiment(req, res)
+    # ------------------------------------------------------------------ storage
+    def _unstored(self) -> tuple[list, list]:
+        exps = [(q, r) for q, r in self.gma.history.experiments[self._scan_exp:]
+                if q.request_id not in self._stored_ids]
+        recs = [rec for rec in self.gma.records[self._scan_rec:] if rec.k not in self._stored_ks]
+        return exps, recs
+
+    def _store(self) -> bool:
+        """Write what memory holds and the store lacks, in one transaction; True once nothing is unstored.
+
+        After a failure the write is tried again at most every :data:`RETRY_PERIOD` s; once ``storage_timeout`` s
+        have passed since the first failure, a failed try ends the run (:meth:`_give_up`)."""
+        exps, recs = self._unstored()
+        if not exps and not recs and self._start_stored:
+            self._scan_exp, self._scan_rec = len(self.gma.history.experiments), len(self.gma.records)
+            return True
+        now = self._clock()
+        if self._failing_since is not None and now - self._last_try < RETRY_PERIOD:
+            return False
+        self._last_try = now
+        h = self.gma.history
+        meta = None if self._start_stored else {**h.meta, **self._run_meta, "c0": h.c0}
+        try:
+            self.store.save_progress(exps, recs, h.pending if recs or meta else None, meta)
+        except StoreError as err:
+            self._write_failed(str(err), now, len(exps), len(recs))
+            return False
+        self._start_stored = True
+        self._stored_ids.update(q.request_id for q, _ in exps)
+        self._stored_ks.update(rec.k for rec in recs)
+        self._scan_exp, self._scan_rec = len(h.experiments), len(self.gma.records)
+        for req, res in exps:
             self.log.info(f"experiment {req.request_id}: tension {-res.cost:.1f} kN, "
                           f"g = {res.constraints[0]:+.1f} m, c = {shape_degrees(req.c)}")
-        self._saved_exp = len(exps)
-        for rec in self.gma.records[self._saved_rec:]:
-            self.store.save_iteration(rec, self.gma.history.pending)
+        for rec in recs:
             self.log.info(f"iteration {rec.k}: c_k = {shape_degrees(rec.c_k)} -> c_next = "
                           f"{shape_degrees(rec.c_next)} ({rec.decision})")
             self._status()
-        self._saved_rec = len(self.gma.records)
+        if self._failing_since is not None:
+            self.log.info(f"stored in {self.store.path} after {now - self._failing_since:.1f} s of failed writes; "
+                          "going on from the held setpoints")
+            self._failing_since, self.storage_error = None, ""
+            self.phase = "experiment" if self._started else "waiting for the plant"
+            self._status()
+        return True
+
+    def _write_failed(self, err: str, now: float, n_exp: int, n_rec: int) -> None:
+        self.storage_error = err
+        if self._failing_since is None:
+            self._failing_since = now
+            self.phase = "holding: cannot write the database"
+            self.log.error(f"{err}. Holding the setpoints in force and keeping {n_exp} experiment(s) and {n_rec} "
+                           f"iteration(s) in memory; trying again every {RETRY_PERIOD:g} s for up to "
+                           f"{self.storage_timeout:g} s (storage_timeout)")
+            self._status()
+        if now - self._failing_since >= self.storage_timeout:
+            self._give_up(err, n_exp, n_rec)
+
+    def _give_up(self, err: str, n_exp: int, n_rec: int) -> None:
+        self.done = True
+        self.phase = f"failed: cannot write {self.store.path} for {self.storage_timeout:g} s"
+        self.log.error(f"{self.phase} ({err}): stopping. Everything stored so far is complete; {n_exp} finished "
+                       f"experiment(s) and {n_rec} iteration(s) were not stored and will be measured and computed "
+                       "again. Free the disk and restart the optimizer on the same database to resume")
+        self._status()
+        self._storage_lost()
 
     def finish(self) -> None:
         rec = self.gma.records[-1]
@@ -162,6 +274,8 @@ class OptimizerRun:
         req = self.session.request
         kv = {"iteration": len(self.gma.records), "phase": self.phase,
               "experiments_done": len(self.gma.history.experiments)}
+        if self.storage_error:
+            kv["storage_error"] = self.storage_error
         if req is not None:
             kv.update(experiment=req.request_id, purpose=req.purpose, setpoints_deg=shape_degrees(req.c),
                       experiment_t_start=f"{self.session.evaluator.t_start:.2f}")

@@ -21,7 +21,7 @@ from ..rto.runner import run_rto
 from ..kite.plant import DEFAULT_WIND_MODEL, WIND_MODELS, PlantConfig
 from ..rto.experiment import default_wind_source
 from ..rto.settings import KiteRTOSettings
-from ..gma import History, HistoryStore
+from ..gma import History, HistoryStore, StoreError
 
 __all__ = ["compare_histories", "main"]
 
@@ -54,7 +54,11 @@ def main(argv=None) -> int:
     if not os.path.isfile(args.db):
         print(f"compare_pure: no database at {args.db!r}", file=sys.stderr)
         return 2
-    store = HistoryStore(args.db)
+    try:
+        store = HistoryStore(args.db)
+    except StoreError as exc:                                           # damaged or foreign: say so
+        print(f"compare_pure: {exc}", file=sys.stderr)
+        return 2
     graph = store.load()
     store.close()
     if graph is None or not graph.iterations:

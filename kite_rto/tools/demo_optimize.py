@@ -26,8 +26,9 @@ def optimize(args, env, out: Path, progress) -> int:
     """Run the GMA graph with the demo's ``args`` in ``env``, showing ``progress``; write the report to ``out``;
     return the exit code (130 when interrupted)."""
     db = out / "rto.sqlite"
-    if db.exists() and not args.resume:
-        db.unlink()
+    if not args.resume:          # a new run: the old database goes, with SQLite's side files (write-ahead log)
+        for path in (db, db.with_name(db.name + "-wal"), db.with_name(db.name + "-shm")):
+            path.unlink(missing_ok=True)
     print(f"kite_rto demo: GMA on the simulated kite, {args.iterations} iterations, lockstep, seed {args.seed}, "
           f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']} (node output in {out / 'nodes.log'}; Ctrl-C stops cleanly, "
           "--resume continues)", flush=True)

@@ -23,7 +23,7 @@ import numpy as np
 from mcap.exceptions import McapError
 
 from ..flight.shape import ShapeBox, setpoints_from_shape
-from ..gma import HistoryStore
+from ..gma import HistoryStore, StoreError
 from ..kite.params import KiteParams
 from ..kite.plant import PlantConfig
 from ..rto.oracle import find_oracle, plant_performance
@@ -179,7 +179,11 @@ def main(argv=None) -> int:
         except (McapError, KeyError, ValueError, EOFError) as exc:   # a damaged or foreign file: say so
             print(f"cannot read {args.mcap} as a kite_rto MCAP recording: {exc}", file=sys.stderr)
             return 2
-    history = HistoryStore(args.db).load()
+    try:
+        history = HistoryStore(args.db).load()
+    except StoreError as exc:                                           # damaged or foreign: say so
+        print(exc, file=sys.stderr)
+        return 2
     if history is None:
         print(f"{args.db} holds no run", file=sys.stderr)
         return 2
