@@ -31,7 +31,7 @@ from rclpy.utilities import remove_ros_args
 from ..nodes import topics as T
 from ..nodes.parameters import declare_params
 from ..nodes.spin import run_node
-from .markers import marker_array
+from .markers import PointCache, marker_array
 from .record import TOPICS, message_definition, subscriber_qos, type_name
 from .record_time import PER_SAMPLE, SimLogTime
 from .viz import PARAMS as SCENE_PARAMS
@@ -64,6 +64,7 @@ class FoxgloveBridge(Node):
         self.forwarded = dict.fromkeys(self.channels, 0)
         self._last_fwd: dict = {}
         self._last_broadcast = 0.0
+        self.points = PointCache()
         for topic in FORWARDED:
             qos = VIEWER if topic in PER_SAMPLE else subscriber_qos(topic)
             self.create_subscription(TOPICS[topic][0], topic, self._forwarder(topic), qos, raw=True)
@@ -100,7 +101,7 @@ class FoxgloveBridge(Node):
             self.server.broadcast_time(sim_ns)
 
     def _scene(self, shapes, stamp_ns: int) -> None:
-        self.channels[T.MARKERS].log(serialize_message(marker_array(shapes, stamp_ns)), log_time=stamp_ns)
+        self.channels[T.MARKERS].log(serialize_message(marker_array(shapes, stamp_ns, cache=self.points)), log_time=stamp_ns)
         self.forwarded[T.MARKERS] += 1
 
     def destroy_node(self):

@@ -32,7 +32,7 @@ from ..nodes import topics as T
 from ..nodes.interface import LATCHED, RELIABLE_10, stamp_to_ns
 from ..nodes.parameters import ParamSpec, declare_params
 from ..nodes.spin import run_node
-from .markers import marker_array
+from .markers import PointCache, marker_array
 
 __all__ = ["PARAMS", "VIEWER", "SceneFeed", "VizNode", "tracker_from_params", "main"]
 
@@ -40,15 +40,16 @@ PARAMS = (
     ParamSpec("period", 0.1, "simulated time between two scenes", 0.001, 10.0, unit="s"),
     ParamSpec("max_rate", 20.0, "most scenes per wall second (0 = no limit)", 0.0, 1000.0, unit="Hz"),
     ParamSpec("trail", 40.0, "length of the flown trail (about one lap)", 0.1, 3600.0, unit="s"),
-    ParamSpec("trail_step", 0.1, "simulated time between two trail points", 0.001, 10.0, unit="s"),
+    ParamSpec("trail_step", 0.2, "simulated time between two trail points", 0.001, 10.0, unit="s"),
     ParamSpec("h_min", 100.0, "height of the minimum-altitude plane (the optimizer's h_min)", 0.0, 1000.0, unit="m"),
     ParamSpec("z_ref", 10.0, "anemometer height, where the wind arrow starts", 0.0, 1000.0, unit="m"),
     ParamSpec("wind_scale", 5.0, "wind arrow length per wind speed", 0.0, 100.0, unit="m/(m/s)"),
     ParamSpec("wing_span", 24.0, "span of the drawn kite (exaggerated to be seen)", 0.1, 200.0, unit="m"),
 )
 
-VIEWER = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
-"""Per-sample subscriptions of a viewer: best effort (a missed sample is a skipped frame, never a stall)."""
+VIEWER = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
+"""Per-sample subscriptions of a viewer: best effort (a missed sample is a skipped frame, never a stall); a deep
+queue rides out a burst while a scene is being built."""
 
 
 def tracker_from_params(v: dict) -> SceneTracker:
@@ -97,12 +98,13 @@ class VizNode(Node):
         super().__init__("kite_viz", **kwargs)
         values = declare_params(self, PARAMS)
         self.pub = self.create_publisher(MarkerArray, T.MARKERS, RELIABLE_10)
+        self.points = PointCache()
         self.feed = SceneFeed(self, tracker_from_params(values), self._publish)
         self.get_logger().info(f"publishing the 3-D scene on {T.MARKERS} (frame anchor) every "
                                f"{values['period']:g} s of simulated time, at most {values['max_rate']:g} per wall s")
 
     def _publish(self, shapes, stamp_ns: int) -> None:
-        self.pub.publish(marker_array(shapes, stamp_ns))
+        self.pub.publish(marker_array(shapes, stamp_ns, cache=self.points))
 
 
 def main(argv=None) -> int:
