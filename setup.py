@@ -11,7 +11,8 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/config",
+         glob("config/*.yaml") + glob("config/*.foxglove.json") + glob("config/*.plotjuggler.xml")),
     ],
     install_requires=["setuptools"],
     zip_safe=True,
@@ -31,6 +32,8 @@ setup(
             "kite_record = kite_rto.nodes.entry:kite_record",
             "kite_report = kite_rto.tools.rto_report:main",
             "kite_demo = kite_rto.tools.demo:main",
+            "kite_viz = kite_rto.tools.viz:main",
+            "kite_foxglove = kite_rto.tools.foxglove_live:main",
         ],
     },
 )

@@ -15,6 +15,9 @@ import uuid
 
 import pytest
 from mcap.reader import make_reader
+from mcap_ros2.reader import read_ros2_messages
+
+from kite_rto.tools.record_time import PER_SAMPLE
 
 PY = sys.executable
 
@@ -115,7 +118,7 @@ def test_ctrl_c_stops_the_demo_and_every_node(ros_env, tmp_path):
         assert out.wait_for(lambda ln: "s sim" in ln and "ETA" in ln, 90.0), f"no progress line: {out.lines}"
         assert out.wait_for(lambda ln: "lap 0:" in ln, 60.0), f"no lap in the progress line: {out.lines}"
         kids = children(demo.pid)
-        assert len(kids) == 3, kids                            # recorder, controller, plant
+        assert len(kids) == 4, kids                            # recorder, kite_viz, controller, plant
         os.killpg(demo.pid, signal.SIGINT)                     # what a terminal does on Ctrl-C
         t0 = time.monotonic()
         demo.wait(timeout=20)
@@ -161,6 +164,33 @@ def test_short_fly_run_with_recording(ros_env, tmp_path):
     # 2101 samples (0 .. 42 s); a loaded machine may cost some (see test_record.py), never many
     assert counts["/kite/state"] >= 0.9 * 2101 and counts["/kite/laps"] == summary["laps"]
     assert not tagged_processes(env)
+    # The recording of the main job on simulated time: it decodes with mcap_ros2, its log times span the flight
+    # (0 .. 42 s), each sample is in it once, the 3-D scene (kite_viz) is in it, and so are the nodes' parameters.
+    log_times, stamps, scenes = [], {}, 0
+    for m in read_ros2_messages(str(mcap)):
+        log_times.append(m.log_time_ns)
+        topic = m.channel.topic
+        if topic == "/kite/markers":
+            scenes += 1
+            assert {mk.ns for mk in m.ros_msg.markers} >= {"kite", "tether", "reference", "wind", "h_min"}
+            assert m.log_time_ns == m.ros_msg.markers[0].header.stamp.sec * 10**9 + \
+                m.ros_msg.markers[0].header.stamp.nanosec
+        elif topic in PER_SAMPLE:
+            st = m.ros_msg.clock if topic == "/clock" else m.ros_msg.header.stamp
+            stamps.setdefault(topic, []).append(st.sec * 10**9 + st.nanosec)
+    assert min(log_times) == 0 and 42 * 10**9 - 20_000_000 <= max(log_times) <= 42 * 10**9
+    for topic, s in stamps.items():
+        assert len(s) == len(set(s)), f"{topic}: {len(s) - len(set(s))} samples recorded twice"
+    # at most one scene per 0.1 s of the flight (kite_viz without a wall-rate cap when recording): 421 at most. Its
+    # subscriptions are best effort, so a loaded machine costs some (seen here: 246 to 419 at load average 6-7 on 2
+    # cores); the count depends on the machine's speed, the presence of the scene does not.
+    assert 20 <= scenes <= 421 and counts["/kite/markers"] == scenes
+    with open(mcap, "rb") as f:
+        meta = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
+    assert {"/plant", "/controller", "/kite_viz", "kite_record"} <= set(meta), sorted(meta)
+    assert meta["/plant"]["duration"] == "42.0"
+    print(f"recording: {len(log_times)} messages, log time {min(log_times) / 1e9:g} .. {max(log_times) / 1e9:g} s, "
+          f"{scenes} scenes, metadata {sorted(meta)}; {res.stdout.splitlines()[-1] if res.stdout else ''}")
 
 
 @pytest.mark.ros

@@ -12,12 +12,17 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from mcap.reader import make_reader
 from mcap_ros2.reader import read_ros2_messages
 from rclpy.serialization import serialize_message
+from nav_msgs.msg import Path
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_msgs.msg import UInt32
+from visualization_msgs.msg import Marker, MarkerArray
 
 from kite_rto.nodes import topics as T
 from kite_rto.nodes.interface import ns_to_stamp
 from kite_rto.nodes.controller_node import LAP_FIELDS
 from kite_rto.tools.record import (TOPICS, McapRecording, generated_definition, message_definition, type_name)
+from kite_rto.tools.record_time import PER_SAMPLE, SimLogTime, cdr_stamp
 
 from rosutil import Probe, start_node, stop
 
@@ -27,6 +32,45 @@ PY = sys.executable
 def test_topic_table_covers_every_project_topic():
     names = {v for k, v in vars(T).items() if k.isupper() and isinstance(v, str)}
     assert names == set(TOPICS)
+    assert PER_SAMPLE <= set(TOPICS)
+
+
+def _cdr(msg) -> bytes:
+    return serialize_message(msg)
+
+
+def test_log_time_is_the_simulated_stamp_and_samples_count_once():
+    types = {t: type_name(cls) for t, (cls, _) in TOPICS.items()}
+    lt = SimLogTime(types)
+    state = _example(JointState)                                          # stamped 12.34 s
+    clock = Clock()
+    clock.clock = ns_to_stamp(12_340_000_000)
+    assert lt.log_time(T.CLOCK, _cdr(clock), wall_ns=99) == 12_340_000_000
+    assert lt.log_time(T.STATE, _cdr(state), wall_ns=100) == 12_340_000_000
+    assert lt.log_time(T.STATE, _cdr(state), wall_ns=101) is None        # the plant re-published it
+    assert lt.log_time(T.STEERING, _cdr(state), wall_ns=102) == 12_340_000_000
+    assert lt.duplicates == {T.STATE: 1}
+    assert lt.log_time(T.LAPS, _cdr(state), 103) == lt.log_time(T.LAPS, _cdr(state), 104) == 12_340_000_000
+    assert lt.log_time(T.CRASHES, _cdr(UInt32(data=1)), 105) == 12_340_000_000          # no header: the clock
+    assert lt.log_time(T.REFERENCE_PATH, _cdr(Path()), 106) == 12_340_000_000           # stamp 0 = not set
+    walled = _example(JointState)
+    walled.header.stamp = ns_to_stamp(1_796_000_000_000_000_000)                        # a node on wall time
+    assert lt.log_time(T.SETPOINTS, _cdr(walled), 107) == 12_340_000_000 and lt.replaced == 1
+    markers = MarkerArray(markers=[Marker()])
+    markers.markers[0].header.stamp = ns_to_stamp(12_300_000_000)
+    assert lt.log_time(T.MARKERS, _cdr(markers), 108) == 12_300_000_000
+    assert lt.log_time(T.MARKERS, _cdr(MarkerArray()), 109) == 12_340_000_000
+    markers.markers[0].header.stamp = ns_to_stamp(0)
+    assert lt.log_time(T.MARKERS, _cdr(markers), 109) == 0                              # the scene of sample 0
+    restarted = _example(JointState)
+    restarted.header.stamp = ns_to_stamp(0)
+    assert lt.log_time(T.STATE, _cdr(restarted), 110) == 0              # a new plant: recorded, its time again
+    assert lt.log_time(T.STATE, _cdr(restarted), 111) is None
+    wall = SimLogTime(types, "wall")
+    assert wall.log_time(T.STATE, _cdr(state), 5) == 5 and wall.log_time(T.STATE, _cdr(state), 6) is None
+    assert cdr_stamp(b"\x00\x01", 4) is None
+    with pytest.raises(ValueError, match="expected one of sim, wall"):
+        SimLogTime(types, "gps")
 
 
 def _example(cls):
@@ -121,6 +165,9 @@ def test_record_command_on_a_live_graph_and_report(ros_env, tmp_path):
         log_times.append(m.log_time_ns)
         if hasattr(m.ros_msg, "header"):
             stamps.setdefault(topic, []).append(m.ros_msg.header.stamp.sec * 10**9 + m.ros_msg.header.stamp.nanosec)
+            if topic in PER_SAMPLE:
+                assert m.log_time_ns == stamps[topic][-1], topic           # log time = simulated time
+    assert min(log_times) == 0 and max(log_times) >= 42 * 10**9 - 20_000_000            # the simulated span
     expected = {T.CLOCK, T.STATE, T.POSITION, T.TENSION, T.WIND, T.STEERING, T.LAPS, T.REFERENCE_PATH, T.CRASHES}
     assert expected <= set(counts), counts
     assert {t: types[t] for t in (T.STATE, T.LAPS, T.CRASHES, T.REFERENCE_PATH)} == {
@@ -133,7 +180,7 @@ def test_record_command_on_a_live_graph_and_report(ros_env, tmp_path):
     n_expected = round(42.0 / 0.02) + 1
     for topic in (T.STATE, T.POSITION, T.TENSION, T.WIND):
         s = np.array(stamps[topic])
-        assert np.all(np.diff(s) >= 0), f"{topic} stamps go back"          # re-published samples repeat a stamp
+        assert np.all(np.diff(s) > 0), f"{topic} stamps repeat or go back"  # each sample recorded once
         u = np.unique(s)
         assert u[0] == 0 and u[-1] >= 42 * 10**9 - 20_000_000, topic
         assert np.all(u % 20_000_000 == 0)
@@ -144,8 +191,13 @@ def test_record_command_on_a_live_graph_and_report(ros_env, tmp_path):
     assert np.all(np.diff(log_times) >= 0)
     assert counts[T.LAPS] >= 1
     with open(out, "rb") as f:
-        summary = make_reader(f).get_summary()
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        meta = {m.name: m.metadata for m in reader.iter_metadata()}
     assert summary.statistics.message_count == sum(counts.values())
+    assert meta["kite_record"]["log_time"] == "sim"
+    assert meta["/plant"]["duration"] == "42.0" and meta["/plant"]["wait_subscribers"] == "2"   # the graph's parameters
+    assert meta["/controller"]["k_psi"] and "re-published samples skipped" in err
 
     rep = subprocess.run([PY, "-m", "kite_rto.tools.rto_report", "--mcap", str(out), "--out", str(tmp_path / "rep"),
                           "--no-judge"], env=ros_env, capture_output=True, text=True, timeout=120)

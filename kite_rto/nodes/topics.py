@@ -2,7 +2,7 @@
 from ..flight.steering_loop import SYNC_NAMES
 
 __all__ = ["CLOCK", "STATE", "POSITION", "TENSION", "WIND", "STEERING", "SETPOINTS", "STATUS", "SYNC", "SYNC_NAMES",
-           "REFERENCE_PATH", "LAPS", "CRASHES", "WIND_ESTIMATE"]
+           "REFERENCE_PATH", "LAPS", "CRASHES", "WIND_ESTIMATE", "MARKERS"]
 
 CLOCK = "/clock"
 STATE = "/kite/state"
@@ -17,3 +17,4 @@ SYNC = "/rto/sync"
 REFERENCE_PATH = "/kite/reference_path"
 LAPS = "/kite/laps"
 CRASHES = "/kite/crashes"
+MARKERS = "/kite/markers"            # kite_viz (kite_rto.tools.viz): the 3-D scene, visualization_msgs/MarkerArray

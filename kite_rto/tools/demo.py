@@ -7,7 +7,8 @@ iteration; ends with the per-iteration table, the optimality gap against the ora
 flown path over the reference on the N-W plane (``path.png``).
 
 A progress line shows simulated time, iteration k/N and the ETA (updated in place on a terminal). ``--record
-FILE.mcap`` records every topic (kite_record as a 4th process). Ctrl-C (or SIGTERM) stops every node, writes a
+FILE.mcap`` records every topic on simulated time, with the 3-D scene (kite_record and kite_viz as extra
+processes); ``--viz`` publishes the scene only. Ctrl-C (or SIGTERM) stops every node, writes a
 partial report from what was flown (optimize: measured values only) and exits with code 130.
 """
 from __future__ import annotations
@@ -43,7 +44,11 @@ def parse_args(argv=None):
     ap.add_argument("--iterations", type=int, default=10, help="optimize: GMA iterations (default 10)")
     ap.add_argument("--resume", action="store_true", help="optimize: continue the run in --out/rto.sqlite")
     ap.add_argument("--record", metavar="FILE.mcap",
-                    help="also record every topic of the run to this MCAP file (kite_record as a 4th process)")
+                    help="also record every topic of the run to this MCAP file, log time = simulated time (kite_record "
+                         "and kite_viz as extra processes)")
+    ap.add_argument("--viz", action="store_true",
+                    help="also publish the 3-D scene on /kite/markers for RViz2 or Foxglove (kite_viz as a process; "
+                         "implied by --record)")
     ap.add_argument("--progress", type=float, default=10.0, metavar="S",
                     help="wall seconds between progress lines when the output is not a terminal (default 10; "
                          "on a terminal the progress line is updated in place)")

@@ -1,5 +1,5 @@
 """What both modes of the main job share around the node processes: rclpy for the in-process observer, the
-plant's parameters, the optional recorder process, and spinning the observer while waiting.
+plant's parameters, the optional recorder and 3-D scene processes, and spinning the observer while waiting.
 
 Imported only once a run starts (it imports rclpy), never for ``--help``.
 """
@@ -44,22 +44,36 @@ def spin_until(pred, node, timeout: float, period: float = 0.05) -> bool:
     return pred()
 
 
-def start_recorder(args, log, env, rec, procs) -> int:
-    """With ``--record``: start kite_record as a process and wait until it listens; return the number of extra
-    /kite/state subscribers the plant must wait for (0 or 1)."""
-    if not args.record:
-        return 0
-    Path(args.record).resolve().parent.mkdir(parents=True, exist_ok=True)
+def _start_listener(name: str, cmd: list, log, env, rec, procs) -> None:
+    """Start a process that subscribes /kite/state and wait (60 s at most) until it does."""
     before = rec.count_subscribers(STATE)
-    recorder = NodeProcess("record", log=log, env=env,
-                           cmd=[sys.executable, "-m", "kite_rto.tools.record", "--out", str(args.record)])
-    procs.append(recorder)
-    spin_until(lambda: rec.count_subscribers(STATE) > before or not recorder.alive(), rec, 60.0, period=0.1)
-    if not recorder.alive():
-        raise RuntimeError(f"the recorder exited (code {recorder.proc.returncode}): "
-                           + " | ".join(recorder.lines[-3:]))
-    print(f"  recording every topic to {args.record}", flush=True)
-    return 1
+    proc = NodeProcess(name, log=log, env=env, cmd=cmd)
+    procs.append(proc)
+    spin_until(lambda: rec.count_subscribers(STATE) > before or not proc.alive(), rec, 60.0, period=0.1)
+    if not proc.alive():
+        raise RuntimeError(f"{name} exited (code {proc.proc.returncode}): " + " | ".join(proc.lines[-3:]))
+
+
+def start_recorder(args, log, env, rec, procs) -> int:
+    """With ``--record``: start kite_record and kite_viz (the 3-D scene, so that the recording holds
+    /kite/markers); with ``--viz`` alone: kite_viz. Wait until they listen; return the number of extra /kite/state
+    subscribers the plant must wait for (0, 1 or 2)."""
+    extra = 0
+    if args.record:
+        Path(args.record).resolve().parent.mkdir(parents=True, exist_ok=True)
+        _start_listener("record", [sys.executable, "-m", "kite_rto.tools.record", "--out", str(args.record)],
+                        log, env, rec, procs)
+        extra += 1
+    if args.record or getattr(args, "viz", False):
+        # recording: one scene per 0.1 s of the flight, however fast the lockstep loop runs (no wall-rate cap);
+        # live only: at most 20 per wall second, what a screen shows
+        cap = ["--ros-args", "-p", "max_rate:=0.0"] if args.record else []
+        _start_listener("viz", [sys.executable, "-m", "kite_rto.tools.viz", *cap], log, env, rec, procs)
+        extra += 1
+        print("  3-D scene on /kite/markers (kite_viz; RViz2 or Foxglove, fixed frame anchor)", flush=True)
+    if args.record:
+        print(f"  recording every topic to {args.record} (log time = simulated time)", flush=True)
+    return extra
 
 
 def recorder_summary(procs) -> None:

@@ -53,7 +53,7 @@ def optimize(args, env, out: Path, progress) -> int:
         ctrl = NodeProcess("controller", {"sync_optimizer": True}, log=log, env=env)
         procs.append(ctrl)
         spin_until(lambda: any("new setpoints" in ln for ln in ctrl.lines) or not ctrl.alive(), rec, 120)
-        plant = NodeProcess("plant", plant_params(args, 3 + extra),    # controller, optimizer, demo (+ recorder)
+        plant = NodeProcess("plant", plant_params(args, 3 + extra),    # controller, optimizer, demo (+ recorder, viz)
                             log=log, env=env)
         procs.append(plant)
         shown = 0

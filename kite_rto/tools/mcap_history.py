@@ -36,7 +36,9 @@ def read_mcap(path) -> SimpleNamespace:
         if summary is not None:
             data.topics = {ch.topic: summary.statistics.channel_message_counts.get(cid, 0)
                            for cid, ch in summary.channels.items()} if summary.statistics else {}
-        for _schema, channel, message in reader.iter_messages(topics=wanted, log_time_order=True):
+        # file order = arrival order: the same sequence whether log times are simulated (a restarted plant starts
+        # again at 0) or wall receive times
+        for _schema, channel, message in reader.iter_messages(topics=wanted, log_time_order=False):
             topic = channel.topic
             if topic == T.STATE:
                 state = deserialize_message(message.data, JointState)

@@ -1,6 +1,6 @@
 """Record the kite_rto topics to an MCAP file that Foxglove, PlotJuggler and ``ros2 bag`` read.
 
-``python -m kite_rto.tools.record --out run.mcap [--duration S] [--topics /kite/state /kite/laps ...]``
+``python -m kite_rto.tools.record --out run.mcap [--duration S] [--log-time sim|wall] [--topics /kite/state ...]``
 (console script ``kite_record``; ``ros2 run kite_rto kite_record ...`` after colcon build). Records every project
 topic (``TOPICS`` below: the topics of :mod:`kite_rto.nodes.topics` with their message types and the QoS their
 publishers offer) until ``--duration`` wall seconds have passed or Ctrl-C / SIGTERM; the file is always closed
@@ -10,8 +10,14 @@ The file follows the MCAP ``ros2`` profile as ``ros2 bag record -s mcap`` writes
 (encoding ``ros2msg``, the type's ``.msg`` text followed by every dependency's text after a ``====...`` and
 ``MSG: pkg/Type`` line), one channel per topic (message encoding ``cdr``, ``offered_qos_profiles`` metadata), and
 messages as the CDR bytes that arrived on the wire (raw subscriptions: nothing is deserialized or re-encoded).
-Log time = publish time = receive time (wall clock, ns), as ``ros2 bag record`` without ``--use-sim-time``; the
-simulation time is in the messages' header stamps and on ``/clock``.
+
+Log time = simulated time (``--log-time sim``, the default): a message's header stamp, or the latest ``/clock`` for
+one without (rule in :mod:`kite_rto.tools.record_time`), so Foxglove's and PlotJuggler's timeline is the flight's;
+publish time = wall receive time (ns). ``--log-time wall`` logs the wall receive time instead, as ``ros2 bag
+record`` without ``--use-sim-time``. Each sample is recorded once (the lockstep plant's re-publications of a sample
+are skipped). The parameters of every node in the graph are stored as MCAP ``Metadata`` records, one per node
+(name = the node's full name, e.g. ``/plant``; fetched through its ``get_parameters`` service when the recorder
+first sees it), and one ``kite_record`` record says how the file was written.
 """
 from __future__ import annotations
 
@@ -35,10 +41,13 @@ from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
+from visualization_msgs.msg import MarkerArray
 
 from ..nodes import topics as T
 from ..nodes.interface import LATCHED, MEASUREMENTS, RELIABLE_10
 from ..nodes.spin import request_exit, run_node
+from .graph_params import GraphParameters
+from .record_time import LOG_TIME_MODES, PER_SAMPLE, SimLogTime
 
 __all__ = ["TOPICS", "topic_type", "type_name", "message_definition", "generated_definition", "qos_yaml",
            "McapRecording", "RecordNode", "main"]
@@ -57,6 +66,7 @@ TOPICS: dict = {
     T.SETPOINTS: (JointState, LATCHED),
     T.STATUS: (DiagnosticArray, RELIABLE_10),
     T.SYNC: (JointState, MEASUREMENTS),
+    T.MARKERS: (MarkerArray, RELIABLE_10),
 }
 """Every project topic -> (message class, QoS its publisher offers). A test checks it covers ``nodes.topics``."""
 
@@ -208,6 +218,7 @@ class McapRecording:
         self.channels: dict = {}
         self.counts: dict = {}
         self._sequence = 0
+        self.metadata = 0
         self.closed = False
 
     def add_topic(self, topic: str, cls, qos: QoSProfile) -> int:
@@ -230,6 +241,13 @@ class McapRecording:
                                  sequence=self._sequence)
         self.counts[topic] += 1
 
+    def add_metadata(self, name: str, values: dict) -> None:
+        """One MCAP ``Metadata`` record: ``name`` and string key/values (ignored once the file is closed)."""
+        if self.closed:
+            return
+        self._writer.add_metadata(name, {str(k): str(v) for k, v in values.items()})
+        self.metadata += 1
+
     def close(self) -> None:
         """Write the summary and close the file (idempotent)."""
         if not self.closed:
@@ -247,12 +265,14 @@ class McapRecording:
 # ------------------------------------------------------------------------------------------ recorder node
 class RecordNode:
     """Raw subscriptions on ``node``, one per topic (QoS matched to its publishers, deep queues), that write every
-    message to a :class:`McapRecording` as it arrives (log time = wall receive time)."""
+    message to a :class:`McapRecording` as it arrives: log time by :class:`~kite_rto.tools.record_time.SimLogTime`
+    (``log_time`` = ``sim`` or ``wall``), publish time = wall receive time; re-published samples skipped."""
 
-    def __init__(self, node, recording: McapRecording, topics, depth: int = 1000):
+    def __init__(self, node, recording: McapRecording, topics, depth: int = 1000, log_time: str = "sim"):
         self.node = node
         self.recording = recording
         self.started = time.monotonic()
+        self.clock = SimLogTime({t: type_name(TOPICS[t][0]) for t in topics}, log_time)
         for topic in topics:
             cls, offered = TOPICS[topic]
             recording.add_topic(topic, cls, offered)
@@ -261,9 +281,13 @@ class RecordNode:
     def _writer_for(self, topic: str):
         write = self.recording.write
         now = time.time_ns
+        log_time = self.clock.log_time
 
         def callback(data):     # one argument: the events executor does not pass message info
-            write(topic, data, now())
+            wall = now()
+            t = log_time(topic, data, wall)
+            if t is not None:
+                write(topic, data, t, wall)
         return callback
 
 
@@ -272,7 +296,14 @@ def _make_node(args):
         def __init__(self):
             super().__init__("kite_record")
             self.recording = McapRecording(args.out, use_files=not args.no_msg_files)
-            self.rec = RecordNode(self, self.recording, args.topics)
+            self.rec = RecordNode(self, self.recording, args.topics, log_time=args.log_time)
+            self.recording.add_metadata("kite_record", {
+                "log_time": args.log_time, "publish_time": "wall receive time",
+                "topics": " ".join(args.topics), "started_wall": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                "ros_domain_id": os.environ.get("ROS_DOMAIN_ID", "0"),
+                "duplicates": "re-published samples of " + " ".join(sorted(PER_SAMPLE)) + " skipped"})
+            if not args.no_params:
+                self.params = GraphParameters(self, self.recording.add_metadata)
             self.get_logger().info(f"recording {len(args.topics)} topics to {args.out}"
                                    + (f" for {args.duration:g} s" if args.duration else " until Ctrl-C"))
             if args.duration:
@@ -285,8 +316,12 @@ def _make_node(args):
         def destroy_node(self):
             self.recording.close()
             counts = ", ".join(f"{t} {n}" for t, n in self.recording.counts.items() if n)
+            dup = sum(self.rec.clock.duplicates.values())
+            nodes = len(self.params.done) if hasattr(self, "params") else 0
             print(f"[kite_record] wrote {self.recording.total} messages to {args.out}"
-                  + (f" ({counts})" if counts else ""), file=sys.stderr, flush=True)
+                  + (f" ({counts})" if counts else "")
+                  + f"; log time {args.log_time}; {dup} re-published samples skipped; parameters of {nodes} nodes",
+                  file=sys.stderr, flush=True)
             return super().destroy_node()
 
     return _Recorder()
@@ -299,6 +334,11 @@ def parse_args(argv=None):
     ap.add_argument("--duration", type=float, default=0.0, help="wall seconds to record (default: until Ctrl-C)")
     ap.add_argument("--topics", nargs="+", default=sorted(TOPICS), metavar="TOPIC",
                     help="topics to record (default: all kite_rto topics)")
+    ap.add_argument("--log-time", choices=LOG_TIME_MODES, default="sim",
+                    help="sim (default): log time = the message's simulated stamp (or the latest /clock); "
+                         "wall: the wall receive time")
+    ap.add_argument("--no-params", action="store_true",
+                    help="do not store the nodes' parameters as metadata records")
     ap.add_argument("--no-msg-files", action="store_true",
                     help="build the schemas from the message classes instead of the installed .msg files")
     return ap.parse_args(argv)
