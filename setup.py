@@ -32,8 +32,8 @@ setup(
             "kite_record = kite_rto.nodes.entry:kite_record",
             "kite_report = kite_rto.tools.rto_report:main",
             "kite_demo = kite_rto.tools.demo:main",
-            "kite_viz = kite_rto.tools.viz:main",
-            "kite_foxglove = kite_rto.tools.foxglove_live:main",
+            "kite_viz = kite_rto.nodes.entry:kite_viz",
+            "kite_foxglove = kite_rto.nodes.entry:kite_foxglove",
         ],
     },
 )

@@ -11,11 +11,13 @@ import sys
 
 from .stop_signals import STOP
 
-__all__ = ["MODULES", "run", "plant", "controller", "optimizer", "echo_pilot", "kite_record"]
+__all__ = ["MODULES", "run", "plant", "controller", "optimizer", "echo_pilot", "kite_record", "kite_viz",
+           "kite_foxglove"]
 
 MODULES = {"plant": "kite_rto.nodes.plant_node", "controller": "kite_rto.nodes.controller_node",
            "optimizer": "kite_rto.nodes.optimizer_node", "echo_pilot": "kite_rto.nodes.echo_pilot",
-           "kite_record": "kite_rto.tools.record"}
+           "kite_record": "kite_rto.tools.record", "kite_viz": "kite_rto.tools.viz",
+           "kite_foxglove": "kite_rto.tools.foxglove_live"}
 """Executable name -> module with a ``main()``."""
 
 
@@ -45,6 +47,14 @@ def echo_pilot():
 
 def kite_record():
     return run("kite_record")
+
+
+def kite_viz():
+    return run("kite_viz")
+
+
+def kite_foxglove():
+    return run("kite_foxglove")
 
 
 if __name__ == "__main__":
