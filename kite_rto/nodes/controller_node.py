@@ -5,8 +5,10 @@ gets the current setpoints); answers every ``/kite/state`` sample on ``/kite/ste
 (the lockstep handshake); publishes the reference path (nav_msgs/Path, for RViz/Foxglove) and per-lap statistics.
 With ``sync_optimizer:=true`` (lockstep) it answers a sample only after the optimizer's ``/rto/sync`` message for it
 and takes the setpoints from there, so a setpoint change takes effect at the same sample as in the pure runner.
-All logic is :class:`kite_rto.flight.steering_loop.SteeringLoop` (join, timeline, restart, optimizer sync) around
-:class:`kite_rto.flight.controller.PathController` and :class:`kite_rto.flight.laps.LapDetector`.
+All logic is :class:`kite_rto.flight.steering_loop.SteeringLoop` (join, timeline, restart, setpoints coalesced per
+sample, optimizer sync) around :class:`kite_rto.flight.controller.PathController` and
+:class:`kite_rto.flight.laps.LapDetector`. Every 0.5 s wall it looks at the graph: several publishers of an input
+(two plants, a foreign setpoint source) are warned about by name (:class:`kite_rto.flight.sources.SourceWatch`).
 """
 from __future__ import annotations
 
@@ -22,8 +24,10 @@ from sensor_msgs.msg import JointState
 
 from ..flight.controller import ControllerSettings, PathController
 from ..flight.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, Setpoints, SetpointError
+from ..flight.sources import SourceWatch, parse_source
 from ..flight.steering_loop import SteeringLoop, fmt_setpoints
 from ..kite.params import KiteParams, ParameterError
+from .graph_watch import controller_inputs, publishers_of
 from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
 from .peer_check import PlantAgreement
 from .parameters import ParamSpec, declare_params
@@ -58,6 +62,9 @@ PARAMS = (
     ParamSpec("sync_optimizer", False, "lockstep: answer each sample only after the optimizer has processed it "
               "(/rto/sync) and take the setpoints from there, so the graph flies exactly the pure runner's sequence; "
               "it waits as long as an optimizer is in the graph, and answers at once when none is"),
+    ParamSpec("setpoint_source", "*", "the only node whose /rto/setpoints apply, fully qualified (e.g. /optimizer): "
+              "while another node publishes /rto/setpoints, and 1 s after, every setpoint message is ignored; "
+              "* = any publisher"),
     ParamSpec("blend_time", _C.blend_time, "duration of the blend to new setpoints (0: switch at once)", 0.0, 600.0,
               unit="s", runtime=True),
     ParamSpec("E", KiteParams.E, "model glide ratio (nominal)", 0.5, 30.0, unit="dimensionless"),
@@ -69,6 +76,8 @@ PARAMS = (
 )
 PLANT_SHARED = ("dt", "r", "z_ref", "E", "g_s", "shear", "dead_time", "rate_limit")
 """Parameters the plant has too: checked against the plant's when it appears (:mod:`.peer_check`)."""
+GRAPH_PERIOD = 0.5
+"""Wall s between two looks at the graph (several publishers of an input are warned about within this)."""
 LAP_FIELDS = ("lap", "lap_time", "mean_tension", "min_altitude", "rms_cross_track_deg", "tension_coefficient",
               "theta_0", "A_phi", "A_theta")
 """Names of the /kite/laps JointState: lap index, s, N, m, deg, N/(m/s)^2, then the lap's projection (rad)."""
@@ -107,23 +116,31 @@ class ControllerNode(Node):
         self.pub_steering = self.create_publisher(JointState, STEERING, MEASUREMENTS)
         self.pub_path = self.create_publisher(Path, REFERENCE_PATH, LATCHED)
         self.pub_laps = self.create_publisher(JointState, LAPS, RELIABLE_10)
+        source = parse_source(v["setpoint_source"])
         try:
             self.loop = SteeringLoop(params, settings, c0, answer=self.answer, lap=self.publish_lap,
                                      path=self.publish_path, logger=self.get_logger(), sync=v["sync_optimizer"],
                                      setpoint_sources=lambda: self.count_publishers(SETPOINTS),
-                                     sync_sources=lambda: self.count_publishers(SYNC))
+                                     sync_sources=lambda: self.count_publishers(SYNC),
+                                     state_sources=lambda: self.count_publishers(STATE), setpoint_source=source,
+                                     setpoint_publishers=lambda: publishers_of(self, SETPOINTS),
+                                     setpoint_matched=lambda: self.sub_setpoints.get_publisher_count())
         except SetpointError as err:
             raise ParameterError(f"initial setpoints (theta_0_deg, A_phi_deg, A_theta_deg): {err}") from None
         self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10)
         self.create_subscription(Vector3Stamped, WIND, self.wind_callback, RELIABLE_10)
         self.create_subscription(WrenchStamped, TENSION, self.tension_callback, RELIABLE_10)
         self.create_subscription(PointStamped, POSITION, self.position_callback, RELIABLE_10)
-        self.create_subscription(JointState, SETPOINTS, self.setpoints_callback, LATCHED)
+        self.sub_setpoints = self.create_subscription(JointState, SETPOINTS, self.setpoints_callback, LATCHED)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
         if self.loop.sync:
             self.create_subscription(JointState, SYNC, self.sync_callback, RELIABLE_10)
-            self.create_timer(0.05, self.loop.watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
+            self.create_timer(0.05, self.loop.watchdog, clock=steady)
         self.plant_agreement = PlantAgreement(self, {n: float(v[n]) for n in PLANT_SHARED},
                                               {s.name: s.unit for s in PARAMS})
+        self.watch = SourceWatch(self.get_logger())
+        self.watched = controller_inputs(source, self.loop.sync)
+        self.create_timer(GRAPH_PERIOD, self.graph_check, clock=steady)
         self.publish_path()
         self.get_logger().info(f"controller up: setpoints {fmt_setpoints(c0)}")
 
@@ -148,6 +165,18 @@ class ControllerNode(Node):
             raise ParameterError(str(err)) from None
         self.loop.controller.retune(**changes)
         self.loop.settings = settings
+
+    def graph_check(self) -> None:
+        """Every GRAPH_PERIOD s: warn about several publishers of an input, publish a pending path or summary, and
+        subscribe /rto/setpoints again (its latched value) once setpoint_source publishes it alone again."""
+        for topic, meaning in self.watched.items():
+            self.watch.update(topic, publishers_of(self, topic), meaning)
+        self.loop.housekeeping()
+        inbox = self.loop.inbox
+        if inbox.refresh and inbox.guard.clean():
+            inbox.refresh = False
+            self.destroy_subscription(self.sub_setpoints)
+            self.sub_setpoints = self.create_subscription(JointState, SETPOINTS, self.setpoints_callback, LATCHED)
 
     # ------------------------------------------------------------ subscriptions
     def state_callback(self, msg: JointState) -> None:

@@ -1,0 +1,33 @@
+"""The ROS graph as the pure core sees it: the publishers of a topic as :class:`~kite_rto.flight.sources.Publisher`
+(fully qualified node name and endpoint GID).
+
+rclpy offers no per-message sender to a subscription callback spun by the events executor (a callback taking the
+message info makes rclpy 7.1's ``EventsExecutor.spin_once`` fail with ``SystemError``, and the SingleThreadedExecutor's
+message info has no ``publisher_gid``): who publishes comes from the graph, ``get_publishers_info_by_topic``
+(about 0.1 ms per call here).
+"""
+from __future__ import annotations
+
+from ..flight.sources import Publisher, node_name
+from .topics import CLOCK, SETPOINTS, STATE, SYNC
+
+__all__ = ["publishers_of", "controller_inputs"]
+
+_TWO_PLANTS = "more than one plant on this domain? The controller keeps steering the kite it flies"
+
+
+def publishers_of(node, topic: str) -> list[Publisher]:
+    """The publishers of ``topic`` in ``node``'s view of the graph."""
+    return [Publisher(node_name(i.node_name, i.node_namespace), bytes(i.endpoint_gid).hex())
+            for i in node.get_publishers_info_by_topic(topic)]
+
+
+def controller_inputs(source: str | None, sync: bool) -> dict:
+    """The controller's inputs that must have one publisher, and what several of them mean (the warning's end)."""
+    inputs = {STATE: _TWO_PLANTS, CLOCK: _TWO_PLANTS,
+              SETPOINTS: (f"only {source}'s setpoints apply (setpoint_source), none while another node publishes"
+                          if source else "setpoints from more than one node: the latest at each sample applies "
+                          "(parameter setpoint_source restricts them to one node)")}
+    if sync:
+        inputs[SYNC] = "more than one optimizer synchronizing this controller"
+    return inputs
