@@ -8,7 +8,7 @@ and takes the setpoints from there, so a setpoint change takes effect at the sam
 All logic is :class:`kite_rto.flight.steering_loop.SteeringLoop` (join, timeline, restart, setpoints coalesced per
 sample, optimizer sync) around :class:`kite_rto.flight.controller.PathController` and
 :class:`kite_rto.flight.laps.LapDetector`. Every 0.5 s wall it looks at the graph: several publishers of an input
-(two plants, a foreign setpoint source) are warned about by name (:class:`kite_rto.flight.sources.SourceWatch`).
+(two plants, a foreign setpoint source) are warned about by name (:class:`.graph_watch.InputWatch`).
 """
 from __future__ import annotations
 
@@ -24,10 +24,10 @@ from sensor_msgs.msg import JointState
 
 from ..flight.controller import ControllerSettings, PathController
 from ..flight.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, Setpoints, SetpointError
-from ..flight.sources import SourceWatch, parse_source
+from ..flight.sources import parse_source
 from ..flight.steering_loop import SteeringLoop, fmt_setpoints
 from ..kite.params import KiteParams, ParameterError
-from .graph_watch import controller_inputs, publishers_of
+from .graph_watch import InputWatch, publishers_of
 from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
 from .peer_check import PlantAgreement
 from .parameters import ParamSpec, declare_params
@@ -76,8 +76,6 @@ PARAMS = (
 )
 PLANT_SHARED = ("dt", "r", "z_ref", "E", "g_s", "shear", "dead_time", "rate_limit")
 """Parameters the plant has too: checked against the plant's when it appears (:mod:`.peer_check`)."""
-GRAPH_PERIOD = 0.5
-"""Wall s between two looks at the graph (several publishers of an input are warned about within this)."""
 LAP_FIELDS = ("lap", "lap_time", "mean_tension", "min_altitude", "rms_cross_track_deg", "tension_coefficient",
               "theta_0", "A_phi", "A_theta")
 """Names of the /kite/laps JointState: lap index, s, N, m, deg, N/(m/s)^2, then the lap's projection (rad)."""
@@ -131,16 +129,14 @@ class ControllerNode(Node):
         self.create_subscription(Vector3Stamped, WIND, self.wind_callback, RELIABLE_10)
         self.create_subscription(WrenchStamped, TENSION, self.tension_callback, RELIABLE_10)
         self.create_subscription(PointStamped, POSITION, self.position_callback, RELIABLE_10)
-        self.sub_setpoints = self.create_subscription(JointState, SETPOINTS, self.setpoints_callback, LATCHED)
-        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.sub_setpoints = None
+        self.subscribe_setpoints()
         if self.loop.sync:
             self.create_subscription(JointState, SYNC, self.sync_callback, RELIABLE_10)
-            self.create_timer(0.05, self.loop.watchdog, clock=steady)
+            self.create_timer(0.05, self.loop.watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.plant_agreement = PlantAgreement(self, {n: float(v[n]) for n in PLANT_SHARED},
                                               {s.name: s.unit for s in PARAMS})
-        self.watch = SourceWatch(self.get_logger())
-        self.watched = controller_inputs(source, self.loop.sync)
-        self.create_timer(GRAPH_PERIOD, self.graph_check, clock=steady)
+        self.inputs = InputWatch(self, self.loop, source, resubscribe=self.subscribe_setpoints)
         self.publish_path()
         self.get_logger().info(f"controller up: setpoints {fmt_setpoints(c0)}")
 
@@ -166,19 +162,13 @@ class ControllerNode(Node):
         self.loop.controller.retune(**changes)
         self.loop.settings = settings
 
-    def graph_check(self) -> None:
-        """Every GRAPH_PERIOD s: warn about several publishers of an input, publish a pending path or summary, and
-        subscribe /rto/setpoints again (its latched value) once setpoint_source publishes it alone again."""
-        for topic, meaning in self.watched.items():
-            self.watch.update(topic, publishers_of(self, topic), meaning)
-        self.loop.housekeeping()
-        inbox = self.loop.inbox
-        if inbox.refresh and inbox.guard.clean():
-            inbox.refresh = False
-            self.destroy_subscription(self.sub_setpoints)
-            self.sub_setpoints = self.create_subscription(JointState, SETPOINTS, self.setpoints_callback, LATCHED)
-
     # ------------------------------------------------------------ subscriptions
+    def subscribe_setpoints(self) -> None:
+        """(Re)subscribe /rto/setpoints: a new subscription gets the latched setpoints of the publishers now."""
+        if self.sub_setpoints is not None:
+            self.destroy_subscription(self.sub_setpoints)
+        self.sub_setpoints = self.create_subscription(JointState, SETPOINTS, self.setpoints_callback, LATCHED)
+
     def state_callback(self, msg: JointState) -> None:
         self.loop.state_sample(stamp_to_ns(msg.header.stamp), msg.name, msg.position, msg.velocity)
 

@@ -1,5 +1,5 @@
 """The ROS graph as the pure core sees it: the publishers of a topic as :class:`~kite_rto.flight.sources.Publisher`
-(fully qualified node name and endpoint GID).
+(fully qualified node name and endpoint GID), and the controller's look at its inputs (:class:`InputWatch`).
 
 rclpy offers no per-message sender to a subscription callback spun by the events executor (a callback taking the
 message info makes rclpy 7.1's ``EventsExecutor.spin_once`` fail with ``SystemError``, and the SingleThreadedExecutor's
@@ -8,10 +8,15 @@ message info has no ``publisher_gid``): who publishes comes from the graph, ``ge
 """
 from __future__ import annotations
 
-from ..flight.sources import Publisher, node_name
+from rclpy.clock import Clock, ClockType
+
+from ..flight.sources import Publisher, SourceWatch, node_name
 from .topics import CLOCK, SETPOINTS, STATE, SYNC
 
-__all__ = ["publishers_of", "controller_inputs"]
+__all__ = ["publishers_of", "controller_inputs", "InputWatch", "GRAPH_PERIOD"]
+
+GRAPH_PERIOD = 0.5
+"""Wall s between two looks at the graph (several publishers of an input are warned about within this)."""
 
 _TWO_PLANTS = "more than one plant on this domain? The controller keeps steering the kite it flies"
 
@@ -31,3 +36,28 @@ def controller_inputs(source: str | None, sync: bool) -> dict:
     if sync:
         inputs[SYNC] = "more than one optimizer synchronizing this controller"
     return inputs
+
+
+class InputWatch:
+    """The controller's look at the graph every :data:`GRAPH_PERIOD` wall s (a steady timer on ``node``).
+
+    Warns, throttled, while an input has several publishers (:class:`~kite_rto.flight.sources.SourceWatch`), lets
+    ``loop`` (the :class:`~kite_rto.flight.steering_loop.SteeringLoop`) publish a pending path or setpoint summary,
+    and calls ``resubscribe()`` once the configured setpoint source publishes /rto/setpoints alone again after
+    messages were ignored (a new subscription gets its latched setpoints).
+    """
+
+    def __init__(self, node, loop, source: str | None, resubscribe):
+        self.node, self.loop, self.resubscribe = node, loop, resubscribe
+        self.watch = SourceWatch(node.get_logger())
+        self.inputs = controller_inputs(source, loop.sync)
+        node.create_timer(GRAPH_PERIOD, self.check, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def check(self) -> None:
+        for topic, meaning in self.inputs.items():
+            self.watch.update(topic, publishers_of(self.node, topic), meaning)
+        self.loop.housekeeping()
+        inbox = self.loop.inbox
+        if inbox.refresh and inbox.guard.clean():
+            inbox.refresh = False
+            self.resubscribe()
