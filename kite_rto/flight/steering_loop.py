@@ -191,9 +191,10 @@ class SteeringLoop(OptimizerSync):
         n = self._state_sources()
         if n < 2:
             return False
-        self.reject("other plant", f"ignored state sample stamped {stamp * 1e-9:.3f} s: {n} publishers of "
-                                   f"/kite/state and the kite at sim time {self.timeline.last * 1e-9:.3f} s still "
-                                   "flies (another plant on this domain?); serving that one")
+        self.reject("other plant", f"rejected state message stamped {stamp * 1e-9:.3f} s at sim time "
+                                   f"{self.timeline.last * 1e-9:.3f} s: stale or future, and {n} publishers of "
+                                   "/kite/state while the kite served still flies (another plant on this domain?); "
+                                   "serving that one")
         return True
 
     def _reject_jump(self) -> None:
