@@ -18,7 +18,8 @@ __all__ = ["publishers_of", "controller_inputs", "InputWatch", "GRAPH_PERIOD"]
 GRAPH_PERIOD = 0.5
 """Wall s between two looks at the graph (several publishers of an input are warned about within this)."""
 
-_TWO_PLANTS = "more than one plant on this domain? The controller keeps steering the kite it flies"
+_TWO_PLANTS = ("more than one plant on this domain (or a killed one DDS still lists)? The controller keeps steering "
+               "the kite it flies")
 
 
 def publishers_of(node, topic: str) -> list[Publisher]:
