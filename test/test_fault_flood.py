@@ -190,24 +190,29 @@ def test_second_plant_is_named_and_the_first_kite_kept(probe, ros_env, request, 
             probe.spin_until(lambda: False, 3.0)
         finally:
             stop_all([plant_b, plant_a, ctrl])
-        b_first = min(t for k, t in times.states if k < a0 - 10**9 and t > times.state[a0])
+        b_first, b_k = min((t, k) for k, t in times.states if k < a0 - 10**9 and t > times.state[a0])
+        b_start = (b_first - b_k) * 1e-9        # wall time of its sample 0 (real time, rate 1: stamp = elapsed)
         b_stamps = {k for k, t in times.states if t >= b_first and k < a0 - 10**9}
         b_answered = len({k for k, t in times.steers if t >= b_first and k in b_stamps})
         a_during = times.window(b_first, b_end, stamps={k for k in times.state if k > a0})
         a_after = times.window(b_end, b_end + 2 * 10**9, stamps={k for k in times.state if k > a0})
         warned = ctrl.matching("publishers of /kite/state: ")
         named = [ln for ln in warned if len(set(re.findall(r"/plant \(gid ([0-9a-f]+)\)", ln))) == 2]
-        delay = _log_time(warned[0]) - b_first * 1e-9 if warned else math.nan
-        delay_named = _log_time(named[0]) - b_first * 1e-9 if named else math.nan
-        row.outcome = (f"first warning {delay:.2f} s after the second plant's first sample, naming both /plant "
-                       f"publishers by GID {delay_named:.2f} s after it, {len(warned)} in all (throttled); the first "
-                       "kite during the overlap: "
+        delay = _log_time(warned[0]) - b_start if warned else math.nan
+        delay_named = _log_time(named[0]) - b_start if named else math.nan
+        other = ctrl.matching("another plant on this domain")
+        seen = re.search(r"stamped ([\d.]+) s", other[0]) if other else None
+        row.outcome = (f"first warning {delay:.2f} s after the second plant published its first sample, naming both "
+                       f"/plant publishers by GID {delay_named:.2f} s after it, {len(warned)} in all (throttled); "
+                       f"discovery: the first sample of the second plant the probe got was its {b_k * 1e-9:.2f} s "
+                       f"one, the controller's {seen.group(1) if seen else '?'} s one; the first kite during the "
+                       "overlap: "
                        f"{_fmt(a_during)}; after: {_fmt(a_after)}; second plant: {b_answered} of {len(b_stamps)} "
                        f"samples answered; 'jumped back' {ctrl.count('jumped back')}, other-plant rejections "
                        f"warned {ctrl.count('another plant on this domain')}")
         row.unsafe_setpoints = 0
         assert named, ctrl.text()[-3000:]
-        assert delay_named < 10.0                               # generous (target: within 2 s, GRAPH_PERIOD 0.5 s)
+        assert delay_named < 15.0               # generous: DDS discovery takes 2-3 s here, then GRAPH_PERIOD (0.5 s)
         assert ctrl.count("jumped back") == 0 and ctrl.count("another plant on this domain") >= 1
         assert b_answered <= 2 < len(b_stamps)                  # a race with discovery may answer its first
         assert a_during["answered"] > 0.5 and a_after["answered"] > 0.5, row.outcome
