@@ -94,7 +94,8 @@ def test_setpoints_late_joiner_rejection_and_path(probe, ros_env):
 
 @pytest.mark.parametrize("arg,needle", [("theta_0_deg:=95.0", "parameter theta_0_deg = 95.0"),
                                         ("box_A_phi_deg:=[50.0,40.0]", "parameter box_A_phi_deg = [50.0, 40.0]"),
-                                        ("theta_0_deg:=20.0", "initial setpoints")])
+                                        ("theta_0_deg:=20.0", "initial setpoints"),
+                                        ("setpoint_source:=1optimizer", "parameter setpoint_source = '1optimizer'")])
 def test_bad_parameters_stop_the_controller(arg, needle, ros_env):
     import subprocess
     import sys

@@ -1,5 +1,6 @@
 """SteeringLoop without DDS: the controller node's join, timeline, restart and optimizer sync, on a fake clock."""
 import math
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -8,7 +9,10 @@ import pytest
 from kite_rto.flight.controller import ControllerSettings, PathController
 from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints
 from kite_rto.flight.sample_join import Place, Timeline
-from kite_rto.flight.steering_loop import SETPOINTS_WAIT, SYNC_ABSENT, SYNC_NAMES, SteeringLoop
+from kite_rto.flight.setpoint_inbox import SUMMARY_PERIOD
+from kite_rto.flight.sources import SOURCE_QUIET, Publisher, SourceWatch, node_name, parse_source
+from kite_rto.flight.steering_loop import PATH_PERIOD, PLANT_QUIET, SETPOINTS_WAIT, SYNC_ABSENT, SYNC_NAMES, SteeringLoop
+from kite_rto.kite.params import ParameterError
 from kite_rto.kite.params import KiteParams
 from kite_rto.kite.model import shared_model
 from kite_rto.kite.plant import KitePlant, PlantConfig
@@ -37,18 +41,20 @@ class Log:
 class Rig:
     """A SteeringLoop with recorded answers, a fake wall clock, and plant samples to feed it."""
 
-    def __init__(self, sync=False, optimizer=True):
+    def __init__(self, sync=False, optimizer=True, **kwargs):
         self.now = 100.0
-        self.answers, self.log = [], Log()
+        self.answers, self.log, self.paths = [], Log(), []
         self.optimizer_alive = int(optimizer)          # publishers of /rto/sync in the graph
+        self.plants = 1                                # publishers of /kite/state in the graph
         self.loop = SteeringLoop(KiteParams(), ControllerSettings(), DEFAULT_SETPOINTS,
                                  answer=lambda s, d: self.answers.append((s, d)), lap=lambda s, lap: None,
-                                 path=lambda: None, logger=self.log, sync=sync,
-                                 setpoint_sources=lambda: int(optimizer), sync_sources=lambda: self.optimizer_alive,
-                                 clock=lambda: self.now)
+                                 path=lambda: self.paths.append(self.loop.controller.setpoints),
+                                 logger=self.log, sync=sync, setpoint_sources=lambda: int(optimizer),
+                                 sync_sources=lambda: self.optimizer_alive, state_sources=lambda: self.plants,
+                                 clock=lambda: self.now, **kwargs)
         self.plant = KitePlant(PlantConfig(), seed=0)
         self.samples = []
-        for _ in range(20):
+        for _ in range(40):
             self.samples.append(self.plant.measure())
             self.plant.step(0.0)
         self.now += SETPOINTS_WAIT                     # past the start-up wait for setpoints
@@ -254,3 +260,127 @@ def test_after_the_first_sync_a_sample_waits_for_its_own_whatever_the_graph_show
     assert len(rig.answers) == 1 and rig.loop.synchronized() and rig.log.count("waiting") >= 1
     rig.loop.sync_message(DT_NS, SYNC_NAMES, [*NEW, 1.0])          # the optimizer (restarted) processes it
     assert [s for s, _ in rig.answers] == [0, DT_NS]
+
+
+def _setpoints(rig, c):
+    rig.loop.setpoints_message(["A_theta", "theta_0", "A_phi"], [c[2], c[0], c[1]])    # any order of names
+
+
+def test_a_burst_of_setpoints_between_two_samples_applies_only_the_latest_at_the_sample():
+    """A flood between two samples costs cheap checks only: the latest valid setpoints are applied once, at the next
+    sample; the answers are those of a controller switched to them at that sample; logging is one line, then a
+    summary per period."""
+    rig = Rig()
+    rig.sample(0)
+    burst = [Setpoints.from_degrees(31.0 + 0.4 * i, 45.0 + 0.5 * i, 7.0).as_array().tolist() for i in range(20)]
+    calls = []
+    set_setpoints = rig.loop.controller.set_setpoints
+    rig.loop.controller.set_setpoints = lambda c: calls.append(list(c)) or set_setpoints(c)
+    for i, c in enumerate(burst):
+        _setpoints(rig, c)
+        if i == 7:
+            rig.loop.setpoints_message(["theta_0", "A_phi"], [0.6, 0.8])             # malformed: rejected at once
+            _setpoints(rig, [0.6, 1.5, 0.12])                                        # outside the box: rejected
+    assert calls == [] and rig.loop.controller.setpoints == DEFAULT_SETPOINTS       # nothing applied yet
+    assert rig.loop.inbox.received == 22 and rig.loop.reject.counts == {"setpoints": 1, "setpoints value": 1}
+    rig.sample(1)
+    assert calls == [burst[-1]]                                                       # one change: the latest
+    assert rig.loop.controller.setpoints.as_array().tolist() == burst[-1]
+    ref = PathController(shared_model(), KiteParams(), DEFAULT_SETPOINTS, ControllerSettings())
+    expected = [ref.command(_meas(0, rig.samples[0]))]
+    ref.set_setpoints(burst[-1])
+    expected.append(ref.command(_meas(DT_NS, rig.samples[1])))
+    assert [d for _, d in rig.answers] == expected                                   # bit for bit
+    assert rig.paths == [rig.loop.controller.setpoints]                              # published after the answer
+    rig.sample(2)
+    assert len(calls) == 1                                                            # nothing new: nothing applied
+    for k in range(3, 30):                                                            # a flood: 2 per sample
+        _setpoints(rig, burst[k % 2])
+        _setpoints(rig, burst[(k + 1) % 2])
+        rig.now += 0.2
+        rig.sample(k)
+    assert len(calls) == 1 + 27 and rig.loop.inbox.applied == 28
+    assert rig.log.count("new setpoints") <= 2 + 27 * 0.2 / SUMMARY_PERIOD            # throttled, not per message
+    summary = [t for _, t in rig.log.lines if "setpoint messages in the last" in t]
+    assert summary and re.search(r"\d+ setpoint messages in the last [\d.]+ s, applied \d+", summary[0])
+    assert len(rig.paths) <= 2 + 27 * 0.2 / PATH_PERIOD                               # path throttled too
+
+
+def test_setpoints_are_ignored_while_a_node_other_than_the_source_publishes():
+    pubs = [Publisher("/optimizer", "01"), Publisher("/intruder", "02")]
+    matched = [2]                                               # writers the subscription is matched with
+    rig = Rig(setpoint_source="/optimizer", setpoint_publishers=lambda: pubs, setpoint_matched=lambda: matched[0])
+    rig.sample(0)
+    _setpoints(rig, NEW)
+    _setpoints(rig, NEW)
+    rig.sample(1)
+    assert rig.loop.controller.setpoints == DEFAULT_SETPOINTS and rig.loop.inbox.ignored == 2
+    assert rig.loop.inbox.refresh and rig.log.count("ignoring /rto/setpoints") == 1
+    assert "/intruder (gid 02)" in [t for _, t in rig.log.lines if "ignoring" in t][0]
+    pubs.pop()                                                  # the graph lists the source alone, but a second
+    _setpoints(rig, NEW)                                        # writer is matched: not in the graph yet
+    rig.sample(2)
+    assert rig.loop.controller.setpoints == DEFAULT_SETPOINTS
+    assert rig.loop.inbox.guard.others() == "1 not in the graph yet"
+    matched[0] = 1                                              # the source alone ...
+    _setpoints(rig, NEW)
+    rig.sample(3)                                               # ... but another one was seen less than 1 s ago
+    assert rig.loop.controller.setpoints == DEFAULT_SETPOINTS and not rig.loop.inbox.guard.clean()
+    assert rig.log.count("less than 1 s before") == 0           # warnings throttled (one per period)
+    rig.now += SOURCE_QUIET
+    assert rig.loop.inbox.guard.clean()                         # the node subscribes again: the latched value
+    _setpoints(rig, NEW)
+    rig.sample(4)
+    assert rig.loop.controller.setpoints.as_array().tolist() == NEW
+    matched[0] = 2                                              # a hit-and-run writer: matched when its message
+    _setpoints(rig, DEFAULT_SETPOINTS.as_array().tolist())      # arrives, gone from DDS before the sample
+    matched[0] = 1
+    rig.sample(5)
+    assert rig.loop.controller.setpoints.as_array().tolist() == NEW
+    assert parse_source("optimizer") == "/optimizer" and parse_source("*") is None
+    with pytest.raises(ParameterError, match="setpoint_source = 'bad name'"):
+        parse_source("bad name")
+
+
+def test_a_second_plant_is_ignored_while_the_first_flies_and_a_restart_still_works():
+    """Two publishers of /kite/state: samples off the timeline are another plant's while the timeline served is
+    alive; once it has been silent PLANT_QUIET s (its plant killed, still listed by DDS) the restart is taken."""
+    rig = Rig()
+    for k in range(20, 30):
+        rig.sample(k)
+    flying = rig.loop.controller
+    rig.plants = 2                                      # a second plant joined the domain
+    for k in range(0, 6):                               # its samples interleave with the first plant's
+        rig.sample(k)
+        rig.sample(30 + k)
+        rig.now += 0.02
+    assert rig.loop.controller is flying and rig.log.count("jumped back") == 0
+    assert [s for s, _ in rig.answers] == [k * DT_NS for k in range(20, 36)]     # only the first kite answered
+    assert rig.loop.reject.counts["other plant"] == 6
+    rig.now += PLANT_QUIET                              # the first plant is gone (killed: DDS still lists it)
+    rig.sample(6)
+    rig.sample(7)
+    assert rig.loop.controller is not flying and rig.log.count("jumped back") == 1
+    assert rig.loop.timeline.last == 7 * DT_NS
+
+
+def test_source_watch_names_every_publisher_throttled():
+    log, now = Log(), [0.0]
+    watch = SourceWatch(log, clock=lambda: now[0], period=10.0)
+    a, b, c = Publisher("/plant", "aa"), Publisher("/plant", "bb"), Publisher("/plant", "cc")
+    watch.update("/kite/state", [a], "two plants")
+    assert log.lines == []
+    for _ in range(10):                                 # 5 s of looks every 0.5 s: one warning
+        watch.update("/kite/state", [a, b], "two plants")
+        now[0] += 0.5
+    assert log.count("2 publishers of /kite/state: /plant (gid aa), /plant (gid bb): two plants") == 1
+    watch.update("/kite/state", [a, b, c], "two plants")            # a new one: at once
+    now[0] += 10.0
+    watch.update("/kite/state", [a, b, c], "two plants")            # the same, a period later: again
+    assert log.count("3 publishers of /kite/state") == 2
+    watch.update("/kite/state", [b], "two plants")
+    assert log.count("/kite/state has one publisher again: /plant (gid bb)") == 1
+    unnamed = Publisher(node_name("_NODE_NAME_UNKNOWN_", "_NODE_NAMESPACE_UNKNOWN_"), "dd")
+    watch.update("/kite/state", [b, unnamed], "two plants")         # the graph knows the writer, not its node
+    watch.update("/kite/state", [b, Publisher("/plant", "dd")], "two plants")     # ... then its name: at once
+    assert log.count("<node not known yet> (gid dd)") == 1 and log.count("/plant (gid bb), /plant (gid dd)") == 1

@@ -1,4 +1,4 @@
-"""The controller node's per-sample logic without ROS: join, timeline, plant restart, optimizer synchronization.
+"""The controller node's per-sample logic without ROS: join, timeline, plant restart, setpoints, optimizer sync.
 
 :class:`SteeringLoop` takes the plant's readings (stamps in integer ns), setpoint and ``/rto/sync`` messages as
 plain values and answers each /kite/state sample through ``answer(stamp_ns, delta)``. Wall time comes from
@@ -7,15 +7,17 @@ plain values and answers each /kite/state sample through ``answer(stamp_ns, delt
 Join: a /kite/state sample is answered once the anemometer reading of its stamp is in (DDS does not order across
 topics); if that reading is lost, the next sample releases the waiting one with the previous reading. Timeline:
 the :class:`~.sample_join.Timeline` rule shared with :class:`~.sample_join.SampleJoin`. A restart candidate is
-answered by a fresh controller, kept if the restart is confirmed; the flying controller never sees it. Bad
-readings, or readings stamped far from the last sample, are rejected with throttled warnings.
+answered by a fresh controller, kept if the restart is confirmed; the flying controller never sees it. While
+/kite/state has several publishers (a second plant on the domain) a sample off the timeline is ignored as long as
+the timeline served is alive (:data:`PLANT_QUIET`): the controller keeps the kite it flies. Bad readings, or
+readings stamped far from the last sample, are rejected with throttled warnings.
 
-Synchronization (``sync=True``): sample k is answered once the optimizer's sync message for it is in (the
-setpoints in force, applied first when its count of setpoint messages changed: the pure runner's order). Once a
-sync message has arrived, every sample waits for its own, however long the optimizer takes (a restarted optimizer
-picks the loop up again): the answer never depends on wall time or on what the graph shows. Only a controller that
-has never heard from an optimizer answers unsynchronized, once no publisher of /rto/sync has been in the graph for
-:data:`SYNC_ABSENT` s (no optimizer at all), and from then on at once until a sync message arrives.
+Setpoints (unsynchronized): each /rto/setpoints message is checked cheaply and kept; the latest is applied at the
+next sample (:class:`~.setpoint_inbox.SetpointInbox`: a flood costs at most one change per sample). The reference
+path is published after the answer, at most every :data:`PATH_PERIOD` s.
+
+Synchronization (``sync=True``): :class:`~.optimizer_sync.OptimizerSync` (setpoints from the optimizer's
+/rto/sync message of each sample).
 """
 from __future__ import annotations
 
@@ -26,29 +28,22 @@ from types import SimpleNamespace
 from ..kite.model import shared_model
 from .controller import PathController
 from .laps import LapDetector
+from .optimizer_sync import SYNC_ABSENT, SYNC_NAMES, OptimizerSync, keep
 from .path import Setpoints, SetpointError
 from .sample_join import Place, RejectLog, Timeline, reading_error, state_values
+from .setpoint_inbox import SetpointInbox, fmt_setpoints
 
-__all__ = ["SteeringLoop", "fmt_setpoints", "SYNC_ABSENT", "SETPOINTS_GRACE", "SETPOINTS_WAIT", "SYNC_NAMES"]
+__all__ = ["SteeringLoop", "fmt_setpoints", "SYNC_ABSENT", "SETPOINTS_GRACE", "SETPOINTS_WAIT", "SYNC_NAMES",
+           "PLANT_QUIET", "PATH_PERIOD"]
 
-SYNC_ABSENT = 1.0
-"""Wall s a sample waits, before any /rto/sync has arrived, while no optimizer is in the graph."""
-SYNC_WAIT_LOG = 10.0
-"""Wall s between the log lines of a sample that waits for a slow optimizer."""
 SETPOINTS_GRACE, SETPOINTS_WAIT = 1.0, 3.0
 """Wall s after start-up during which the controller waits for /rto/setpoints before steering (see
 :meth:`SteeringLoop._await_setpoints`): always for the first, while an optimizer is known for the second."""
-SYNC_NAMES = ["theta_0", "A_phi", "A_theta", "updates"]
-"""Names of a /rto/sync message: the setpoints in force (rad) and the optimizer's setpoint-message count."""
-_KEEP = 64
-"""Anemometer readings and sync entries kept ahead of their samples."""
-
-
-def _keep(entries: dict, stamp: int, value) -> None:
-    """Store ``value`` at ``stamp``, forgetting the oldest entry when :data:`_KEEP` are held."""
-    if len(entries) >= _KEEP:
-        del entries[next(iter(entries))]
-    entries[stamp] = value
+PLANT_QUIET = 2.0
+"""Wall s: while /kite/state has several publishers, a sample off the timeline is another plant's (ignored) unless
+the timeline served has been silent this long (its plant is gone: a restart)."""
+PATH_PERIOD = 0.5
+"""Wall s between two publications of the reference path (the latest setpoints are published, after the answer)."""
 
 
 def _measurement(stamp: int, pos, vel, wind: float) -> SimpleNamespace:
@@ -57,28 +52,34 @@ def _measurement(stamp: int, pos, vel, wind: float) -> SimpleNamespace:
                            psi_dot=vel[2], wind_ref=wind)
 
 
-def fmt_setpoints(c: Setpoints) -> str:
-    """Setpoints in degrees, as the controller logs them."""
-    return "theta_0 {:.1f} deg, A_phi {:.1f} deg, A_theta {:.1f} deg".format(*c.degrees())
-
-
-class SteeringLoop:
+class SteeringLoop(OptimizerSync):
     """Answers plant samples with steering commands; follows setpoints and, optionally, the optimizer's sync.
 
-    ``answer(stamp_ns, delta)`` sends a command, ``lap(stamp_ns, lap)`` a finished lap, ``path()`` is
-    called when the flown setpoints change; ``logger`` has ``info``/``warning`` (extra keyword arguments such as
-    ``throttle_duration_sec`` are passed on). Raises :class:`SetpointError` for initial setpoints ``c0`` outside
-    ``settings.box``.
+    ``answer(stamp_ns, delta)`` sends a command, ``lap(stamp_ns, lap)`` a finished lap, ``path()`` publishes
+    the reference path of the flown setpoints (after a change, at most every :data:`PATH_PERIOD` s); ``logger``
+    has ``info``/``warning`` (extra keyword arguments such as ``throttle_duration_sec`` are passed on). The graph:
+    ``setpoint_sources()``, ``sync_sources()``, ``state_sources()`` count the publishers of /rto/setpoints,
+    /rto/sync and /kite/state; ``setpoint_publishers()`` lists those of /rto/setpoints and ``setpoint_matched()``
+    counts the writers the subscription is matched with (only asked when ``setpoint_source``, the one node whose
+    setpoints apply, is set: :class:`~.setpoint_inbox.SetpointInbox`).
+    Raises :class:`SetpointError` for initial setpoints ``c0`` outside ``settings.box``.
     """
 
     def __init__(self, params, settings, c0: Setpoints, *, answer, lap, path, logger, sync: bool = False,
-                 setpoint_sources=lambda: 0, sync_sources=lambda: 0, clock=time.monotonic):
+                 setpoint_sources=lambda: 0, sync_sources=lambda: 0, state_sources=lambda: 1,
+                 setpoint_source: str | None = None, setpoint_publishers=lambda: [], setpoint_matched=lambda: 0,
+                 clock=time.monotonic):
         self.params, self.settings = params, settings
         self.controller = PathController(shared_model(), params, c0, settings)
         self.laps = LapDetector()
         self._answer, self._lap, self._path, self.log = answer, lap, path, logger
         self._setpoint_sources, self._sync_sources, self._clock = setpoint_sources, sync_sources, clock
+        self._state_sources = state_sources
         self.reject = RejectLog(logger, clock=clock)
+        self.inbox = SetpointInbox(settings.box, logger, self.reject, clock, setpoint_source, setpoint_publishers,
+                                   setpoint_matched)
+        self._path_due, self._path_at = False, -math.inf
+        self._served_at = -math.inf       # wall time of the last sample of the timeline served
         self.timeline = Timeline()
         self._wind, self._tension, self._altitude = params.w_ref, math.nan, math.nan
         self._last_delta = 0.0
@@ -88,20 +89,14 @@ class SteeringLoop:
         self._restart = None              # (fresh controller, its answer) for a restart candidate
         self._setpoints_in = False        # accepted setpoints yet (see _await_setpoints)
         self._t_up = clock()
-        self._setpoints_msg = None        # last valid setpoints (rad); applied at once unless synchronized
-        self.sync = sync
-        self._syncs = {}                  # sync entries by stamp (ns): (setpoints rad, updates)
-        self._sync_held = None            # (stamp, measurement, position, wall time): waits for its sync
-        self._sync_lost = False           # no optimizer: answer at once until a sync message arrives again
-        self._sync_updates = None         # `updates` of the last applied sync
-        self._sync_seen = -math.inf       # wall time an optimizer was last seen in the graph while a sample waited
+        self._init_sync(sync)
 
     # -------------------------------------------------------------- measurements
     def wind_reading(self, stamp: int, v: float) -> None:
         """An anemometer reading (m/s): releases the state sample of its stamp if that one waits for it."""
         if self._bad("wind", v):
             return
-        _keep(self._winds, stamp, v)
+        keep(self._winds, stamp, v)
         for held in (self._pending, self._jump):
             if held is not None and held[0] == stamp:
                 self._process(held)
@@ -137,6 +132,11 @@ class SteeringLoop:
         except ValueError as err:
             self.reject("state", f"rejected state message: {err}")
             return
+        if stamp == self.timeline.last or self.timeline.on(stamp):
+            self._served_at = self._clock()         # the timeline served is alive (see _other_plant)
+        if not self.synchronized():
+            self._take_setpoints()                  # the sample boundary: the latest setpoints message, if any
+        self.inbox.tick(self.controller.setpoints)
         if not self._setpoints_in and self._await_setpoints():
             return
         if self._sync_held is not None:
@@ -147,9 +147,12 @@ class SteeringLoop:
                 self._release_unsynced("the next sample arrived first")
         held = (stamp, pos, vel)
         last = self.timeline.last
+        off = stamp != last and not self.timeline.on(stamp)
+        if off and self._other_plant(stamp):
+            return
         if self._jump is not None:
             self._reject_jump()
-        if stamp != last and not self.timeline.on(stamp):
+        if off:
             if stamp in self._winds:
                 self._process(held)                 # complete: the plant restarted or samples were lost
             else:
@@ -179,6 +182,20 @@ class SteeringLoop:
                              f"{fmt_setpoints(self.controller.setpoints)}")
         self._setpoints_in = True                       # stop waiting (and asking the graph)
         return False
+
+    def _other_plant(self, stamp: int) -> bool:
+        """True (ignore the sample) for a sample off the timeline while /kite/state has several publishers and the
+        timeline served is alive (a sample of it within PLANT_QUIET s): another plant's, not a restart."""
+        if self._clock() - self._served_at >= PLANT_QUIET:
+            return False
+        n = self._state_sources()
+        if n < 2:
+            return False
+        self.reject("other plant", f"rejected state message stamped {stamp * 1e-9:.3f} s at sim time "
+                                   f"{self.timeline.last * 1e-9:.3f} s: stale or future, and {n} publishers of "
+                                   "/kite/state while the kite served still flies (another plant on this domain?); "
+                                   "serving that one")
+        return True
 
     def _reject_jump(self) -> None:
         stamp = self._jump[0]
@@ -214,6 +231,8 @@ class SteeringLoop:
         delta = self.controller.command(m)
         self.timeline.last, self._last_delta = stamp, delta
         self._answer(stamp, delta)
+        if self._path_due:
+            self.publish_path_if_due()
         lap = self.laps.update(m.t, pos[0], pos[1], self._tension, self._altitude,
                                self.controller.status.cross_track, m.wind_ref)
         if lap is not None:
@@ -265,22 +284,36 @@ class SteeringLoop:
 
     # ----------------------------------------------------------------- setpoints
     def setpoints_message(self, names, values) -> None:
-        """New setpoints (``names`` theta_0, A_phi, A_theta in any order, ``values`` rad)."""
-        names = list(names)
-        if sorted(names) != sorted(Setpoints.names()) or len(values) != 3:
-            self.reject("setpoints", f"rejected setpoints message {(names, list(values))!r}: expected names "
-                                     "theta_0, A_phi, A_theta with 3 values (rad)")
+        """New setpoints (``names`` theta_0, A_phi, A_theta in any order, ``values`` rad): checked cheaply and
+        kept; the latest is applied at the next sample (unsynchronized) or on the optimizer's sync message."""
+        c = self.inbox.put(names, values)
+        if c is not None and self.synchronized() and not self._setpoints_in:
+            self.log.info(f"new setpoints {fmt_setpoints(Setpoints.from_array(c))} received; synchronized with the "
+                          "optimizer: setpoints apply at the sample of its /rto/sync")
+            self._setpoints_in = True
+
+    def _take_setpoints(self) -> None:
+        """The sample boundary: fly the latest setpoints message received since the last one, if any."""
+        c = self.inbox.take()
+        if c is None:
             return
-        by_name = dict(zip(names, values))
-        c = [by_name[n] for n in Setpoints.names()]
-        if self.synchronized():                # applied with the sample the optimizer decided them at
-            if not self._setpoints_in:
-                self.log.info(f"new setpoints {fmt_setpoints(Setpoints.from_array(c))} received; synchronized "
-                              "with the optimizer: setpoints apply at the sample of its /rto/sync")
-        elif not self._apply_setpoints(c):
-            return
-        self._setpoints_msg = c
-        self._setpoints_in = True
+        if self.timeline.last is not None and c == self.controller.setpoints.as_array().tolist():
+            self._setpoints_in = True           # flying them already
+        elif self._apply_setpoints(c):
+            self._setpoints_in = True
+
+    def publish_path_if_due(self) -> None:
+        """Publish the reference path if the setpoints changed since it was last published and PATH_PERIOD s have
+        passed (the node calls it now and then too, so the last change is published when samples stop)."""
+        now = self._clock()
+        if self._path_due and now - self._path_at >= PATH_PERIOD:
+            self._path_due, self._path_at = False, now
+            self._path()
+
+    def housekeeping(self) -> None:
+        """Call now and then (the node: every 0.5 s wall): the path and the setpoint summary when samples stop."""
+        self.publish_path_if_due()
+        self.inbox.tick(self.controller.setpoints)
 
     def _apply_setpoints(self, c) -> bool:
         """Fly the setpoints ``c`` (rad): at once before the first sample, else blended; False if refused."""
@@ -295,73 +328,6 @@ class SteeringLoop:
                                            f"{fmt_setpoints(self.controller.setpoints)}")
             return False
         self.laps.reset()
-        self.log.info(f"new setpoints {fmt_setpoints(accepted)}")
-        self._path()
+        self.inbox.applied_change(accepted)
+        self._path_due = True
         return True
-
-    # ------------------------------------------------------- optimizer synchronization
-    def synchronized(self) -> bool:
-        """True while samples wait for the optimizer's sync message."""
-        return self.sync and not self._sync_lost
-
-    def _wait_for_sync(self, stamp: int) -> bool:
-        """True to hold the sample stamped ``stamp`` for its sync; applies the sync message if it is in."""
-        entry = self._syncs.pop(stamp, None)
-        if self._syncs:
-            for s in [s for s in self._syncs if s < stamp]:
-                del self._syncs[s]
-        if entry is not None:
-            self._apply_sync(*entry)
-            return False
-        return not self._sync_lost
-
-    def _apply_sync(self, c, updates: float) -> None:
-        if updates != self._sync_updates or c != self.controller.setpoints.as_array().tolist():
-            self._sync_updates = updates
-            self._apply_setpoints(c)
-
-    def sync_message(self, stamp: int, names, values) -> None:
-        """The optimizer has processed the sample ``stamp``: ``values`` are :data:`SYNC_NAMES`."""
-        vals = [float(x) for x in values]
-        if list(names) != SYNC_NAMES or len(vals) != 4 or not all(map(math.isfinite, vals)):
-            self.reject("sync", f"rejected sync message {(list(names), vals)!r}: expected names {SYNC_NAMES} "
-                                "with 4 finite values")
-            return
-        if not self._stamp_near("sync", stamp):
-            return
-        if self._sync_lost:
-            self._sync_lost = False
-            self.log.info("/rto/sync is back: answering each sample after the optimizer again")
-        held = self._sync_held
-        if held is not None and held[0] == stamp:
-            self._sync_held = None
-            self._apply_sync(vals[:3], vals[3])
-            self._steer(*held[:3])
-        elif self.timeline.last is None or stamp > self.timeline.last:
-            _keep(self._syncs, stamp, (vals[:3], vals[3]))
-
-    def watchdog(self) -> None:
-        """Call periodically (the node: every 0.05 s): releases a held sample when there is no optimizer at all."""
-        held = self._sync_held
-        if held is None:
-            return
-        now = self._clock()
-        if self._sync_updates is not None or self._sync_sources() > 0:
-            self._sync_seen = now
-            if now - held[3] > SYNC_WAIT_LOG:
-                self.log.info(f"sample at {held[0] * 1e-9:.2f} s: waiting {now - held[3]:.0f} s for the optimizer's "
-                              "/rto/sync", throttle_duration_sec=SYNC_WAIT_LOG)
-        elif now - max(held[3], self._sync_seen) > SYNC_ABSENT:
-            self._release_unsynced(f"no optimizer in the graph for {SYNC_ABSENT:g} s")
-
-    def _release_unsynced(self, why: str) -> None:
-        """Answer the held sample with the latest setpoints; answer at once until a sync message is back."""
-        stamp, m, pos, _ = self._sync_held
-        self._sync_held = None
-        self._sync_lost = True
-        self.log.warning(f"sample at {stamp * 1e-9:.2f} s: {why}; steering unsynchronized until the "
-                         "optimizer's /rto/sync is back")
-        c = self._setpoints_msg
-        if c is not None and c != self.controller.setpoints.as_array().tolist():
-            self._apply_setpoints(c)
-        self._steer(stamp, m, pos)

@@ -5,8 +5,10 @@ gets the current setpoints); answers every ``/kite/state`` sample on ``/kite/ste
 (the lockstep handshake); publishes the reference path (nav_msgs/Path, for RViz/Foxglove) and per-lap statistics.
 With ``sync_optimizer:=true`` (lockstep) it answers a sample only after the optimizer's ``/rto/sync`` message for it
 and takes the setpoints from there, so a setpoint change takes effect at the same sample as in the pure runner.
-All logic is :class:`kite_rto.flight.steering_loop.SteeringLoop` (join, timeline, restart, optimizer sync) around
-:class:`kite_rto.flight.controller.PathController` and :class:`kite_rto.flight.laps.LapDetector`.
+All logic is :class:`kite_rto.flight.steering_loop.SteeringLoop` (join, timeline, restart, setpoints coalesced per
+sample, optimizer sync) around :class:`kite_rto.flight.controller.PathController` and
+:class:`kite_rto.flight.laps.LapDetector`. Every 0.5 s wall it looks at the graph: several publishers of an input
+(two plants, a foreign setpoint source) are warned about by name (:class:`.graph_watch.InputWatch`).
 """
 from __future__ import annotations
 
@@ -22,8 +24,10 @@ from sensor_msgs.msg import JointState
 
 from ..flight.controller import ControllerSettings, PathController
 from ..flight.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, Setpoints, SetpointError
+from ..flight.sources import parse_source
 from ..flight.steering_loop import SteeringLoop, fmt_setpoints
 from ..kite.params import KiteParams, ParameterError
+from .graph_watch import InputWatch, publishers_of
 from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
 from .peer_check import PlantAgreement
 from .parameters import ParamSpec, declare_params
@@ -58,6 +62,9 @@ PARAMS = (
     ParamSpec("sync_optimizer", False, "lockstep: answer each sample only after the optimizer has processed it "
               "(/rto/sync) and take the setpoints from there, so the graph flies exactly the pure runner's sequence; "
               "it waits as long as an optimizer is in the graph, and answers at once when none is"),
+    ParamSpec("setpoint_source", "*", "the only node whose /rto/setpoints apply, fully qualified (e.g. /optimizer): "
+              "while another node publishes /rto/setpoints, and 1 s after, every setpoint message is ignored; "
+              "* = any publisher"),
     ParamSpec("blend_time", _C.blend_time, "duration of the blend to new setpoints (0: switch at once)", 0.0, 600.0,
               unit="s", runtime=True),
     ParamSpec("E", KiteParams.E, "model glide ratio (nominal)", 0.5, 30.0, unit="dimensionless"),
@@ -107,23 +114,29 @@ class ControllerNode(Node):
         self.pub_steering = self.create_publisher(JointState, STEERING, MEASUREMENTS)
         self.pub_path = self.create_publisher(Path, REFERENCE_PATH, LATCHED)
         self.pub_laps = self.create_publisher(JointState, LAPS, RELIABLE_10)
+        source = parse_source(v["setpoint_source"])
         try:
             self.loop = SteeringLoop(params, settings, c0, answer=self.answer, lap=self.publish_lap,
                                      path=self.publish_path, logger=self.get_logger(), sync=v["sync_optimizer"],
                                      setpoint_sources=lambda: self.count_publishers(SETPOINTS),
-                                     sync_sources=lambda: self.count_publishers(SYNC))
+                                     sync_sources=lambda: self.count_publishers(SYNC),
+                                     state_sources=lambda: self.count_publishers(STATE), setpoint_source=source,
+                                     setpoint_publishers=lambda: publishers_of(self, SETPOINTS),
+                                     setpoint_matched=lambda: self.sub_setpoints.get_publisher_count())
         except SetpointError as err:
             raise ParameterError(f"initial setpoints (theta_0_deg, A_phi_deg, A_theta_deg): {err}") from None
         self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10)
         self.create_subscription(Vector3Stamped, WIND, self.wind_callback, RELIABLE_10)
         self.create_subscription(WrenchStamped, TENSION, self.tension_callback, RELIABLE_10)
         self.create_subscription(PointStamped, POSITION, self.position_callback, RELIABLE_10)
-        self.create_subscription(JointState, SETPOINTS, self.setpoints_callback, LATCHED)
+        self.sub_setpoints = None
+        self.subscribe_setpoints()
         if self.loop.sync:
             self.create_subscription(JointState, SYNC, self.sync_callback, RELIABLE_10)
             self.create_timer(0.05, self.loop.watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.plant_agreement = PlantAgreement(self, {n: float(v[n]) for n in PLANT_SHARED},
                                               {s.name: s.unit for s in PARAMS})
+        self.inputs = InputWatch(self, self.loop, source, resubscribe=self.subscribe_setpoints)
         self.publish_path()
         self.get_logger().info(f"controller up: setpoints {fmt_setpoints(c0)}")
 
@@ -150,6 +163,12 @@ class ControllerNode(Node):
         self.loop.settings = settings
 
     # ------------------------------------------------------------ subscriptions
+    def subscribe_setpoints(self) -> None:
+        """(Re)subscribe /rto/setpoints: a new subscription gets the latched setpoints of the publishers now."""
+        if self.sub_setpoints is not None:
+            self.destroy_subscription(self.sub_setpoints)
+        self.sub_setpoints = self.create_subscription(JointState, SETPOINTS, self.setpoints_callback, LATCHED)
+
     def state_callback(self, msg: JointState) -> None:
         self.loop.state_sample(stamp_to_ns(msg.header.stamp), msg.name, msg.position, msg.velocity)
 

@@ -100,7 +100,8 @@ plant acted on. Every outcome cell is measured by the test that wrote it.
 Result: {text}.
 
 How each fault is injected and what the nodes do about it: [network.md](network.md) (exposure), the test files
-`test/test_fault_*.py`, the relay `kite_rto/tools/fault_relay.py` (message drop, delay and the crash pilot).
+`test/test_fault_*.py`, the relay `kite_rto/tools/fault_relay.py` (message drop, delay and the crash pilot), the
+setpoint flood `kite_rto/tools/setpoint_flood.py` (a foreign publisher of /rto/setpoints).
 """
 
 
