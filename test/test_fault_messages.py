@@ -219,7 +219,7 @@ def _bad_controller_inputs():
         "/kite/state": [("NaN", state([NAN, 0.1, 0.2])), ("Inf", state([0.6, 0.1, 0.2], [INF, 0, 0])),
                         ("2 values", state([0.6, 0.1])), ("4 values", state([0.6, 0.1, 0.2, 0.3])),
                         ("wrong names", state([0.6, 0.1, 0.2], names=("a", "b", "c"))),
-                        ("theta 5 rad", state([5.0, 0.1, 0.2])), ("rate 1e3 rad/s", state([0.6, 0, 0], [1e3, 0, 0])),
+                        ("theta 5 rad", state([5.0, 0.1, 0.2])), ("rate 1e5 rad/s", state([0.6, 0, 0], [1e5, 0, 0])),
                         ("stamp 30 s behind", good_state(-s5)), ("stamp 30 s ahead", good_state(s5))],
         "/kite/wind": [("NaN", wind(NAN)), ("-3 m/s", wind(-3.0)), ("1e3 m/s", wind(1e3)), ("Inf", wind(INF)),
                        ("stamp 30 s behind", wind(8.0, -s5)), ("stamp 30 s ahead", wind(8.0, s5))],

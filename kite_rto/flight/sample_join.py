@@ -32,7 +32,7 @@ MAX_STAMP_GAP_NS = 1_000_000_000
 # Plausibility limits of the measurements (anything outside is a bad message, not a kite):
 ANGLE_MAX = math.pi          # |theta|, |phi|, rad
 PSI_MAX = 1000.0             # |psi|, rad (psi is not wrapped: it may wind up over loops)
-RATE_MAX = 100.0             # |theta_dot|, |phi_dot|, |psi_dot|, rad/s
+RATE_MAX = 1.0e4             # |theta_dot|, |phi_dot|, |psi_dot|, rad/s (a crash dive reaches 120-270 rad/s)
 TENSION_MAX = 1e7            # line tension, N (the default kite pulls about 6e5 N)
 POSITION_MAX = 1e4           # |x|, |y|, |z|, m (tether 400 m by default)
 WIND_MAX = 100.0             # anemometer, m/s (in [0, WIND_MAX))
