@@ -20,6 +20,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 from ..kite.params import ParameterError
+from .dds_profile import use_shipped_profile
 
 __all__ = ["EXECUTOR_ENV", "DELAY_ENV", "run_node", "request_exit"]
 
@@ -125,7 +126,11 @@ def run_node(factory, args=None, *, events: bool = False) -> int:
     the node is spun by rclpy's C++ events executor (several times less overhead per callback than the
     SingleThreadedExecutor; no coroutine callbacks), unless ``KITE_RTO_EXECUTOR=single`` is set or it is not
     available; the node should then end with :func:`request_exit` rather than raising ``SystemExit``.
+
+    Before ``rclpy.init`` the shipped Fast DDS profile is put in force unless the user chose one
+    (:mod:`kite_rto.nodes.dds_profile`); the node logs which profile it runs with (``DDS profile: ...``).
     """
+    profile, why = use_shipped_profile()
     rclpy.init(args=args)
     node = None
     code = 0
@@ -134,6 +139,7 @@ def run_node(factory, args=None, *, events: bool = False) -> int:
         if delays is not None:
             delays.install()
         node = factory()
+        node.get_logger().info(f"DDS profile: {profile or 'none'} ({why})")
         if delays is not None:
             node.create_timer(0.001, delays.release, clock=Clock(clock_type=ClockType.STEADY_TIME))
             node.get_logger().warning(f"{DELAY_ENV}: every received message is delivered after a random delay of "
