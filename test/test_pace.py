@@ -86,3 +86,20 @@ def test_shipped_profile_is_set_unless_the_user_chose(tmp_path, monkeypatch):
     env = {}
     assert "working directory" in dds_profile.use_shipped_profile(env)[1] and env == {}
     assert os.environ.get("KITE_RTO_DDS_PROFILE") != "set by a test"
+
+
+def test_a_controller_that_answers_few_samples_lowers_the_rate():
+    p = RealtimePacer(DT, 100.0, 0.0)
+    changes = []
+    t = 0.0
+    for k in range(50):                                       # one command every 5 samples, each fresh
+        t += DT / 100.0
+        if k % 5 == 0:
+            p.command(1)
+        c = p.step(t)
+        if c is not None:
+            changes.append(c)
+    assert len(changes) == 1 and changes[0].answered == pytest.approx(0.2) and changes[0].lag is None
+    assert changes[0].rate == pytest.approx(100.0 * 0.25) and changes[0].slower
+    assert "the controller answered only 20 % of the samples; slowing down to 25.0x" in \
+        changes[0].message(DT, first=True)
