@@ -11,8 +11,9 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
+        # parameter defaults, the Fast DDS profile the nodes load (kite_rto/nodes/dds_profile.py), viewer layouts
         ("share/" + package_name + "/config",
-         glob("config/*.yaml") + glob("config/*.foxglove.json") + glob("config/*.plotjuggler.xml")),
+         glob("config/*.yaml") + glob("config/*.xml") + glob("config/*.foxglove.json")),
     ],
     install_requires=["setuptools"],
     zip_safe=True,

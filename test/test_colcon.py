@@ -39,6 +39,8 @@ def test_colcon_installs_package_files(workspace):
     assert (share / "kite_rto" / "package.xml").exists()
     installed = share / "kite_rto" / "config" / "kite_rto.yaml"
     assert installed.read_text() == (ROOT / "config" / "kite_rto.yaml").read_text()
+    profile = share / "kite_rto" / "config" / "fastdds_profile.xml"
+    assert profile.read_text() == (ROOT / "config" / "fastdds_profile.xml").read_text()
     for exe in ("plant", "echo_pilot"):
         assert (workspace / "install" / "kite_rto" / "lib" / "kite_rto" / exe).exists()
 
@@ -47,6 +49,8 @@ def test_installed_plant_runs_and_validates(workspace, ros_env):
     res = run_installed(workspace, "plant", "--ros-args -p mode:=realtime -p rate_factor:=10.0 -p duration:=0.5", ros_env)
     assert res.returncode == 0, res.stdout + res.stderr
     assert "duration reached" in res.stdout + res.stderr
+    # the installed node found the installed DDS profile through the ament index
+    assert "share/kite_rto/config/fastdds_profile.xml (shipped with kite_rto)" in res.stdout + res.stderr
     res = run_installed(workspace, "plant", "--ros-args -p r:=-5.0", ros_env)
     assert res.returncode == 2 and "parameter r = -5.0" in res.stderr
 

@@ -8,6 +8,9 @@ so. Lockstep: the plant waits for each answer as long as a publisher of /kite/st
 kite flies never depends on how fast the machine is), and flies neutral, keeping its clock going, only once none is
 and ``command_timeout`` s have passed (the controller left, or DDS dropped a killed or frozen one); this starts after
 the first command, so a run does not depend on how long the controller takes to start.
+Real time also measures the lag of the steering commands and lowers a ``rate_factor`` the machine cannot hold
+(:mod:`kite_rto.kite.pace`). One plant per graph: a plant refuses to start where another one runs, and warns when a
+second publisher of its topics appears (:mod:`kite_rto.nodes.plant_guard`).
 """
 from __future__ import annotations
 
@@ -21,10 +24,12 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
+from ..kite.pace import RealtimePacer
 from ..kite.plant import KitePlant
 from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, finite_floats, ns_to_stamp, stamp_to_ns
 from .parameters import declare_params
 from .plant_config import PARAMS, config_from_params
+from .plant_guard import WATCH_PERIOD, SecondPublisherWatch, refuse_if_another_plant
 from .spin import request_exit, run_node
 from ..flight.sample_join import RejectLog
 from .topics import CLOCK, CRASHES, POSITION, STATE, STEERING, TENSION, WIND
@@ -74,6 +79,7 @@ class PlantNode(Node):
     def __init__(self, **kwargs):
         super().__init__("plant", **kwargs)
         self.p = declare_params(self, PARAMS, apply=self.apply_params)
+        silent = refuse_if_another_plant(self)          # exit 2 if another plant already publishes our topics
         self.plant = KitePlant(config_from_params(self.p), seed=self.p["seed"])
         self._dt_ns = round(self.p["dt"] * 1e9)
         self._lockstep = self.p["mode"] == "lockstep"
@@ -97,10 +103,13 @@ class PlantNode(Node):
         self._crashes = 0
         self._reject = RejectLog(self.get_logger())        # throttled warnings about bad steering messages
         steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._pacer = None if self._lockstep else RealtimePacer(self.p["dt"], self.p["rate_factor"], time.monotonic())
+        self._pace_warned = False
         if self._lockstep:
             self._timer = self.create_timer(self._timer_period(self.p), self.watchdog_callback, clock=steady)
         else:
             self._timer = self.create_timer(self._timer_period(self.p), self.realtime_callback, clock=steady)
+        self.create_timer(WATCH_PERIOD, SecondPublisherWatch(self, silent).check, clock=steady)
         self.publish_sample()
         self.get_logger().info(f"plant up: mode={self.p['mode']} dt={self.p['dt']} s seed={self.p['seed']}")
 
@@ -115,6 +124,9 @@ class PlantNode(Node):
         v = {**self.p, **changes}
         if "duration" in changes:
             self._end_step = round(v["duration"] / v["dt"]) if v["duration"] > 0 else None
+        if self._pacer is not None and "rate_factor" in changes:
+            self._pacer.request(v["rate_factor"], time.monotonic())
+            self._pace_warned = False
         period_ns = round(self._timer_period(v) * 1e9)
         if period_ns != self._timer.timer_period_ns:
             self._timer.timer_period_ns = period_ns
@@ -147,7 +159,9 @@ class PlantNode(Node):
                 else:
                     self.publish_sample()
                 return
-        elif stamp > now or now - stamp > max(5 * self._dt_ns, _LATE_NS):
+        elif stamp <= now:
+            self._pacer.command((now - stamp) / self._dt_ns)        # accepted or stale: either tells the lag
+        if not self._lockstep and (stamp > now or now - stamp > max(5 * self._dt_ns, _LATE_NS)):
             self._reject("steering stamp", f"rejected steering stamped {stamp * 1e-9:.3f} s at sim time "
                                            f"{now * 1e-9:.3f} s (stale or future)")
             return
@@ -192,6 +206,23 @@ class PlantNode(Node):
             self._fly_neutral()
             self._delta = 0.0
         self.advance(self._delta)
+        change = self._pacer.step(time.monotonic())
+        if change is not None:
+            self._pace(change)
+
+    def _pace(self, change) -> None:
+        """The pacer changed the effective rate (or found it too high at its floor): re-time, say so (the first
+        time as one warning line, then throttled)."""
+        self._timer.timer_period_ns = round(self.p["dt"] / change.rate * 1e9)
+        warn = change.slower and not self._pace_warned
+        self._pace_warned |= warn
+        line = change.message(self.p["dt"], first=warn)
+        if warn:
+            self.get_logger().warning(line)
+        elif change.rate == change.requested:
+            self.get_logger().info(line)
+        else:
+            self.get_logger().info(line, throttle_duration_sec=10.0)
 
     # ---------------------------------------------------------------- helpers
     def advance(self, delta: float) -> None:

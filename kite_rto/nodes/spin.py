@@ -22,6 +22,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from ..kite.params import ParameterError
+from .dds_profile import use_shipped_profile
 from .stop_signals import STOP, StopSignals
 
 __all__ = ["EXECUTOR_ENV", "DELAY_ENV", "run_node", "request_exit"]
@@ -132,6 +133,9 @@ def run_node(factory, args=None, *, events: bool = False) -> int:
     second signal while it stops interrupts whatever it is doing (exit code 130). A worker thread still inside
     native code (e.g. a CasADi build) cannot be interrupted: once the node is destroyed and rclpy shut down, the
     process then ends without waiting for it (``os._exit``: the interpreter's finalization would crash it).
+
+    Before ``rclpy.init`` the shipped Fast DDS profile is put in force unless the user chose one
+    (:mod:`kite_rto.nodes.dds_profile`); the node logs which profile it runs with (``DDS profile: ...``).
     """
     if _wants_help(args if args is not None else sys.argv[1:]):
         print(_usage(factory), end="")
@@ -140,6 +144,7 @@ def run_node(factory, args=None, *, events: bool = False) -> int:
     stop.install()
     if stop.signum is not None:                # stopped during the imports
         return 0
+    profile, why = use_shipped_profile()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     code = 0
@@ -148,6 +153,7 @@ def run_node(factory, args=None, *, events: bool = False) -> int:
         if delays is not None:
             delays.install()
         node = factory()
+        node.get_logger().info(f"DDS profile: {profile or 'none'} ({why})")
         if delays is not None:
             node.create_timer(0.001, delays.release, clock=Clock(clock_type=ClockType.STEADY_TIME))
             node.get_logger().warning(f"{DELAY_ENV}: every received message is delivered after a random delay of "
