@@ -171,7 +171,8 @@ def test_second_plant_is_named_and_the_first_kite_kept(probe, ros_env, request, 
     """A second plant starts on the domain while the first flies in real time: the controller warns naming both
     publishers of /kite/state and keeps steering the first kite; the second one's samples are not answered."""
     with fault_row(request, "second plant on the same domain (controller, real time)",
-                   "a second plant process (/plant, seed 6) starts in real time while the first (seed 5) has flown "
+                   "a second plant process (/plant, seed 6, one_plant_check:=false) starts in real time while the "
+                   "first (seed 5) has flown "
                    "about 15 s; it runs 10 s, then stops") as row:
         times = LoopTimes(probe.node)
         ctrl = node("controller", "controller", ros_env, tmp_path)
@@ -181,7 +182,9 @@ def test_second_plant_is_named_and_the_first_kite_kept(probe, ros_env, request, 
             plant_a = node("plant_a", "plant", ros_env, tmp_path, {"mode": "realtime", "seed": 5, **QUIET})
             assert probe.spin_until(lambda: times.steer and max(times.steer) > 15 * 10**9, 120.0), plant_a.text()
             a0 = max(times.state)                       # the first plant's sim time when the second one starts
-            plant_b = node("plant_b", "plant", ros_env, tmp_path, {"mode": "realtime", "seed": 6, **QUIET})
+            # a second plant that does not check for the first (plants refuse to start by default: test_fault_plant_side)
+            plant_b = node("plant_b", "plant", ros_env, tmp_path, {"mode": "realtime", "seed": 6, **QUIET,
+                                                                   "one_plant_check": False})
             assert probe.spin_until(lambda: any(k < a0 - 10**9 for k, _ in times.states[-20:]), 60.0), \
                 plant_b.text()
             probe.spin_until(lambda: False, 10.0)

@@ -79,7 +79,8 @@ class PlantNode(Node):
     def __init__(self, **kwargs):
         super().__init__("plant", **kwargs)
         self.p = declare_params(self, PARAMS, apply=self.apply_params)
-        silent = refuse_if_another_plant(self)          # exit 2 if another plant already publishes our topics
+        # exit 2 if another plant already publishes our topics (unless one_plant_check:=false)
+        silent = refuse_if_another_plant(self) if self.p["one_plant_check"] else set()
         self.plant = KitePlant(config_from_params(self.p), seed=self.p["seed"])
         self._dt_ns = round(self.p["dt"] * 1e9)
         self._lockstep = self.p["mode"] == "lockstep"
