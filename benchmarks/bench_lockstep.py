@@ -29,6 +29,8 @@ import time
 
 from kite_rto.tools.graph import start_node, stop_node
 
+from _table import print_table
+
 TARGET_RTF = 50.0
 DT = 0.02
 _LINE = re.compile(r"lockstep: (\d+) steps in ([0-9.eE+-]+) s wall")
@@ -108,10 +110,7 @@ def main(argv=None) -> list[tuple]:
     print(f"bench_lockstep: {args.repeats} x {args.duration:g} sim s, dt {DT} s, ROS_DOMAIN_ID {domain}, "
           f"RMW {os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')}; per-run RTF: "
           + ", ".join(f"{r['steps'] * DT / r['wall']:.1f}" for r in good))
-    print("| benchmark | value | target | met |")
-    print("|---|---|---|---|")
-    for r in rows:
-        print("| " + " | ".join(str(v) for v in r) + " |")
+    print_table(rows)
     return rows
 
 

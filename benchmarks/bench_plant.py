@@ -25,6 +25,8 @@ import numpy as np
 
 from kite_rto.kite.plant import KitePlant, PlantConfig
 
+from _table import print_table
+
 TARGET_US = 20.0
 FIELD_TARGET_US = 30.0
 STARTUP_TARGET_S = 1.0
@@ -107,10 +109,7 @@ def main(argv=None) -> list[tuple]:
 
 
 def print_table(rows) -> None:
-    print("| benchmark | value | target | met |")
-    print("|---|---|---|---|")
-    for r in rows:
-        print("| " + " | ".join(str(v) for v in r) + " |")
+    print_table(rows)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,9 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
-from bench_stall import Logged, _Steering, _env, _spin
+from bench_stall import _Steering, _env, _spin, start_realtime
+
+from _table import print_table
 
 DT = 0.02
 
@@ -39,15 +41,7 @@ def run_rate(rate: float, wall: float, env: dict, seed: int = 0) -> dict:
     ctrl = plant = None
     out = {}
     try:
-        ctrl = Logged("controller", {}, env)
-        end = time.monotonic() + 120.0
-        while node.count_publishers("/kite/steering") == 0 and time.monotonic() < end:
-            _spin(executor, 0.1)
-        _spin(executor, 0.5)
-        plant = Logged("plant", {"mode": "realtime", "rate_factor": rate, "seed": seed}, env)
-        end = time.monotonic() + 120.0
-        while not probe.answers and time.monotonic() < end:
-            _spin(executor, 0.05)
+        ctrl, plant = start_realtime(node, executor, probe, env, rate, seed)
         w0, c0 = time.monotonic(), probe.clock_ns
         _spin(executor, wall / 2)
         w1, c1, n1 = time.monotonic(), probe.clock_ns, len(probe.answers)
@@ -100,10 +94,7 @@ def main(argv=None) -> list[tuple]:
           f"ROS_DOMAIN_ID {domain}")
     for ln in r["rate_warnings"][:3]:
         print("  " + ln)
-    print("| benchmark | value | target | met |")
-    print("|---|---|---|---|")
-    for row in rows:
-        print("| " + " | ".join(str(v) for v in row) + " |")
+    print_table(rows)
     return rows
 
 

@@ -40,6 +40,8 @@ from sensor_msgs.msg import JointState
 
 from kite_rto.tools.graph import start_node, stop_node
 
+from _table import print_table
+
 TARGET_BACK = 0.2          # wall s from SIGCONT to the first steering command the plant flies
 FRESH_NS = 500_000_000     # an answer stamped within this of the plant's clock is fresh (the plant's own window)
 _STAMP = re.compile(r"\[\w+\] \[(\d+\.\d+)\]")
@@ -100,6 +102,20 @@ class _Steering:
         return math.nan
 
 
+def start_realtime(node, executor, probe, env: dict, rate_factor: float, seed: int):
+    """Start a controller, then a real-time plant; return both once the probe has heard an answer (or 120 s)."""
+    ctrl = Logged("controller", {}, env)
+    end = time.monotonic() + 120.0
+    while node.count_publishers("/kite/steering") == 0 and time.monotonic() < end:
+        _spin(executor, 0.1)
+    _spin(executor, 0.5)
+    plant = Logged("plant", {"mode": "realtime", "rate_factor": rate_factor, "seed": seed}, env)
+    end = time.monotonic() + 120.0
+    while not probe.answers and time.monotonic() < end:
+        _spin(executor, 0.05)
+    return ctrl, plant
+
+
 def _spin(executor, seconds: float) -> None:
     end = time.monotonic() + seconds
     while time.monotonic() < end:
@@ -124,15 +140,7 @@ def run_stalls(n: int, env: dict, stall: float = 3.0, settle: float = 5.0, rate_
     ctrl = plant = None
     out = {"stalls": [], "crashes": 0, "plant": "", "controller": ""}
     try:
-        ctrl = Logged("controller", {}, env)
-        end = time.monotonic() + 120.0
-        while node.count_publishers("/kite/steering") == 0 and time.monotonic() < end:
-            _spin(executor, 0.1)
-        _spin(executor, 0.5)
-        plant = Logged("plant", {"mode": "realtime", "rate_factor": rate_factor, "seed": seed}, env)
-        end = time.monotonic() + 120.0
-        while not probe.answers and time.monotonic() < end:
-            _spin(executor, 0.1)
+        ctrl, plant = start_realtime(node, executor, probe, env, rate_factor, seed)
         if not probe.answers:
             raise RuntimeError("the controller never answered:\n" + "\n".join(plant.lines[-20:] + ctrl.lines[-20:]))
         stops = []
@@ -232,10 +240,7 @@ def main(argv=None) -> list[tuple]:
     print(f"bench_stall: {args.stalls} stalls of {args.stall:g} s (SIGSTOP/SIGCONT of the controller), "
           f"{args.settle:g} s flight before each, realtime rate_factor {args.rate_factor:g}, seed {args.seed}, "
           f"ROS_DOMAIN_ID {domain}, DDS profile {'Fast DDS defaults' if args.no_profile else 'shipped'}")
-    print("| benchmark | value | target | met |")
-    print("|---|---|---|---|")
-    for r in rows:
-        print("| " + " | ".join(str(v) for v in r) + " |")
+    print_table(rows)
     return rows
 
 
