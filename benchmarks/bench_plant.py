@@ -108,9 +108,5 @@ def main(argv=None) -> list[tuple]:
     return rows
 
 
-def print_table(rows) -> None:
-    print_table(rows)
-
-
 if __name__ == "__main__":
     main()
