@@ -64,6 +64,16 @@ def test_crash_is_detected_counted_and_relaunched():
     assert seen[crash].altitude > 0
 
 
+def test_a_kite_through_the_downwind_ground_point_is_a_crash():
+    """theta <= 0 is the ground downwind of the anchor: a step that takes the kite through it is a crash, even where
+    phi swinging beyond pi leaves the altitude r sin(theta) cos(phi) positive (test_fault_nodes' crash test once
+    ended in such a state, theta -0.0005 rad, phi 4.6 rad, which every node rejected)."""
+    plant = KitePlant(PlantConfig().without_disturbances())
+    plant.state = [0.0005, -3.0, 3.2]           # just above the ground point, heading through it
+    m = plant.step(0.0)
+    assert m.crashes == 1 and m.theta == pytest.approx(plant.config.launch_state[0]) and m.altitude > 0
+
+
 def test_turbulence_statistics_match_settings():
     s = TurbulenceSettings()
     turb = UniformGust(s, 8.0, np.random.default_rng(0))

@@ -4,8 +4,10 @@ Mismatch against the nominal model (SPEC §2): its own parameter values (E, g_s,
 steering (E = E0 - c_E delta^2), steering dead time and rate limit (``actuator.py``), turbulence (a uniform gust,
 ``wind.py``, or a 3-D field the kite and the anemometer sample at their own positions, ``wind_field.py``),
 measurement noise. Fixed-step RK4 integration of the shared CasADi model (evaluated through its pure-Python
-translation). A crash (altitude <= 0 or a non-finite state) is counted and followed by a relaunch from the launch
-state; no NaN ever leaves.
+translation). A crash (altitude <= 0, theta <= 0 or a non-finite state) is counted and followed by a relaunch from
+the launch state; no NaN ever leaves. theta <= 0 is the kite on the ground downwind of the anchor (z = r sin theta
+cos phi = 0 there for every phi): a dive through that point can leave theta slightly negative and phi beyond pi with
+a positive altitude, a state every node rejects.
 """
 from __future__ import annotations
 
@@ -237,7 +239,7 @@ class KitePlant:
             x, out = step_py(x, ad, p, h)
         self.state, self._out = x, out
         # one finiteness test for all values: a sum is NaN or infinite iff a term is (or beyond 1e308, not a kite)
-        if not (out[_ALTITUDE] > 0.0 and _isfinite(sum(x) + sum(out))):
+        if not (out[_ALTITUDE] > 0.0 and x[0] > 0.0 and _isfinite(sum(x) + sum(out))):
             self._relaunch()
         m = self._last = self._measure()
         return m
