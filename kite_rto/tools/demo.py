@@ -59,11 +59,12 @@ def fly(args, env, out: Path, progress: Progress) -> dict:
     import rclpy
 
     from ..nodes.topics import STEERING
-    from .demo_graph import plant_params, recorder_summary, ros_init, spin_until, start_recorder
+    from .demo_graph import plant_params, recorder_summary, ros_init, spin_until, start_recorder, warn_if_domain_busy
     from .recorder import Recorder
 
     ros_init()
     rec = Recorder()
+    warn_if_domain_busy(rec, env)
     procs = []
     log = open(out / "nodes.log", "w")
     wall0 = time.monotonic()

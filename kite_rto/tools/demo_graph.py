@@ -15,7 +15,9 @@ from rclpy.signals import SignalHandlerOptions
 from ..nodes.topics import STATE
 from .graph import NodeProcess
 
-__all__ = ["ros_init", "plant_params", "start_recorder", "recorder_summary", "spin_until"]
+__all__ = ["ros_init", "plant_params", "start_recorder", "recorder_summary", "spin_until", "warn_if_domain_busy"]
+
+GRAPH_NODES = ("plant", "controller", "optimizer", "echo_pilot")
 
 
 def ros_init() -> None:
@@ -31,6 +33,18 @@ def plant_params(args, wait_subscribers: int, **params) -> dict:
         params.update(turbulence=False, anemometer_noise=0.0, noise_angle_deg=0.0, noise_rate=0.0,
                       noise_tension=0.0)
     return params
+
+
+def warn_if_domain_busy(node, env: dict, discovery: float = 1.0) -> list:
+    """After ``discovery`` wall s, the kite_rto nodes already in this ROS domain (another graph, e.g. a test run,
+    would mix its samples and setpoints with the demo's); print one warning naming them. Returns their names."""
+    spin_until(lambda: False, node, discovery)
+    busy = sorted({n for n, _ in node.get_node_names_and_namespaces() if n in GRAPH_NODES})
+    if busy:
+        print(f"kite_rto demo: WARNING: ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']} already has node(s) {', '.join(busy)}: "
+              "another graph shares this domain and will mix with this run; stop it, or set ROS_DOMAIN_ID to a "
+              "free domain", flush=True)
+    return busy
 
 
 def spin_until(pred, node, timeout: float, period: float = 0.05) -> bool:

@@ -11,7 +11,7 @@ import rclpy
 from ..gma import HistoryStore
 from ..rto.experiment import default_wind_source
 from ..rto.settings import KiteRTOSettings
-from .demo_graph import plant_params, recorder_summary, ros_init, spin_until, start_recorder
+from .demo_graph import plant_params, recorder_summary, ros_init, spin_until, start_recorder, warn_if_domain_busy
 from .graph import GraphRun, NodeProcess
 from .progress import OptimizeProgress
 from .recorder import Recorder
@@ -34,6 +34,7 @@ def optimize(args, env, out: Path, progress) -> int:
           "--resume continues)", flush=True)
     ros_init()
     rec = Recorder()
+    warn_if_domain_busy(rec, env)
     log = open(out / "nodes.log", "a" if args.resume else "w")
     procs = []
     wall0 = time.monotonic()
