@@ -37,6 +37,8 @@ def probe():
     p.close()
 
 
+# real time: whether the kite survives depends on the machine keeping up, so not in the default suite
+@pytest.mark.slow
 def test_frozen_controller_in_real_time_steers_again(probe, ros_env, request):
     """SIGSTOP of the controller for 3 s, 3 times: the plant flies neutral, takes steering again when the
     controller resumes, no crash. The shipped DDS profile (100 ms heartbeats) is what makes that fast."""
@@ -63,6 +65,8 @@ def test_frozen_controller_in_real_time_steers_again(probe, ros_env, request):
         assert neutral >= n and crashes == 0 and res["crashes"] == 0, tail
 
 
+# real time: whether the kite survives depends on the machine keeping up, so not in the default suite
+@pytest.mark.slow
 def test_unholdable_rate_is_warned_and_slowed_down(probe, ros_env, request):
     """rate_factor 100 in real time with the controller for 20 s wall: the plant warns that it cannot hold the
     rate (unless this machine holds it) and lowers it to keep the steering lag small; no crash."""
