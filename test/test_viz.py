@@ -121,10 +121,13 @@ def test_kite_foxglove_serves_scene_and_tension_to_a_protocol_client(ros_env):
         plant = start_node("plant", {"duration": 600.0, "wait_subscribers": 2}, ros_env)
         received = {1: [], 2: []}
         end = time.monotonic() + 180.0
-        while time.monotonic() < end and (len(received[1]) < 3 or len(received[2]) < 3):
+        parts = set()        # the wind arrow appears once the bridge has a wind reading (later on a busy machine)
+        while time.monotonic() < end and (len(received[1]) < 3 or len(received[2]) < 3 or "wind" not in parts):
             kind, data = client.receive()
             if kind == "binary" and (md := client.message_data(data)) is not None:
                 received[md[0]].append(md[1:])
+                if md[0] == 1:
+                    parts |= {mk.ns for mk in deserialize_message(md[2], MarkerArray).markers}
     finally:
         for p in (plant, ctrl):
             if p is not None:
@@ -136,13 +139,14 @@ def test_kite_foxglove_serves_scene_and_tension_to_a_protocol_client(ros_env):
     assert len(received[1]) >= 3 and len(received[2]) >= 3, {k: len(v) for k, v in received.items()}
     for log_time, payload in received[1]:
         scene = deserialize_message(payload, MarkerArray)
-        assert {mk.ns for mk in scene.markers} >= {"kite", "tether", "wind", "h_min"}
+        assert {mk.ns for mk in scene.markers} >= {"kite", "tether", "h_min"}
         stamp = scene.markers[0].header.stamp
         assert log_time == stamp.sec * 10**9 + stamp.nanosec          # log time = simulated time
     for log_time, payload in received[2]:
         w = deserialize_message(payload, WrenchStamped)
         assert w.wrench.force.x > 0 and log_time == w.header.stamp.sec * 10**9 + w.header.stamp.nanosec
     assert "forwarded" in err
+    assert "wind" in parts, parts
 
 
 # ------------------------------------------------------------------------------------------------ layouts
