@@ -19,11 +19,8 @@ import statistics
 import sys
 import time
 
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 
-from bench_stall import _Steering, _env, _spin, start_realtime
+from bench_stall import _env, _spin, probe_node, start_realtime
 
 from _table import print_table
 
@@ -32,12 +29,7 @@ DT = 0.02
 
 def run_rate(rate: float, wall: float, env: dict, seed: int = 0) -> dict:
     """Fly plant + controller at ``rate`` for ``wall`` s; returns crashes, rates, lags and the plant's log."""
-    if not rclpy.ok():
-        rclpy.init()
-    node = Node(f"bench_rate_{os.getpid()}")
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    probe = _Steering(node)
+    node, executor, probe = probe_node("bench_rate")
     ctrl = plant = None
     out = {}
     try:

@@ -102,6 +102,16 @@ class _Steering:
         return math.nan
 
 
+def probe_node(name: str):
+    """(node, executor, steering probe) of this process, rclpy initialized if it was not."""
+    if not rclpy.ok():
+        rclpy.init()
+    node = Node(f"{name}_{os.getpid()}")
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    return node, executor, _Steering(node)
+
+
 def start_realtime(node, executor, probe, env: dict, rate_factor: float, seed: int):
     """Start a controller, then a real-time plant; return both once the probe has heard an answer (or 120 s)."""
     ctrl = Logged("controller", {}, env)
@@ -131,12 +141,7 @@ def run_stalls(n: int, env: dict, stall: float = 3.0, settle: float = 5.0, rate_
     "controller": log text}``; each stall dict holds ``back``, ``first``, ``fresh`` (wall s after SIGCONT, NaN when
     not seen within 15 s) and ``crashes``.
     """
-    if not rclpy.ok():
-        rclpy.init()
-    node = Node(f"bench_stall_{os.getpid()}")
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    probe = _Steering(node)
+    node, executor, probe = probe_node("bench_stall")
     ctrl = plant = None
     out = {"stalls": [], "crashes": 0, "plant": "", "controller": ""}
     try:

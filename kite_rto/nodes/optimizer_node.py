@@ -91,6 +91,7 @@ class OptimizerNode(Node):
         self._built = None
         self._history = history
         self._gma_ready = threading.Event()
+        self._start_ticks = 0                  # _finish_start calls while starting (status every 5th)
         self._cancel = threading.Event()       # destroy_node: the worker stops at its next step
         self._builder = threading.Thread(target=self._build, args=(history,), name="optimizer-build", daemon=True)
         self._builder.start()
@@ -141,7 +142,7 @@ class OptimizerNode(Node):
         if self.run is not None:
             return
         if not self._gma_ready.is_set():        # meanwhile, the phase four times a second (a new monitor sees it)
-            self._start_ticks = getattr(self, "_start_ticks", 0) + 1
+            self._start_ticks += 1
             if self._start_ticks % 5 == 0:
                 self.publish_status()
             return
