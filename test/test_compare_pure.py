@@ -1,4 +1,5 @@
-"""kite_rto.tools.compare_pure: a database the pure runner wrote compares equal; a changed cost does not."""
+"""kite_rto.tools.compare_pure: a database the pure runner wrote compares equal; a changed cost or gradient does
+not."""
 import numpy as np
 
 from kite_rto.rto.runner import run_rto
@@ -18,5 +19,8 @@ def test_pure_database_compares_identical_and_a_changed_cost_is_found(tmp_path, 
     other = HistoryStore(str(db)).load()
     other.experiments[1][1].cost = float(np.nextafter(other.experiments[1][1].cost, 0.0))   # one ulp
     diff = compare_histories(other, res.history)
-    assert len(diff) == 1 and diff[0].startswith("experiment k0-1-perturbation: cost")
+    assert diff == [f"experiment k0-1-perturbation: result.cost: graph {other.experiments[1][1].cost!r}, "
+                    f"pure {res.history.experiments[1][1].cost!r}"]
+    other.iterations[0].grad_cost[2] += 1e-12                               # a field compare_pure never printed
+    assert compare_histories(other, res.history)[1].startswith("iteration 0.grad_cost[2]: graph")
     assert main(["--db", str(tmp_path / "missing.sqlite")]) == 2

@@ -15,6 +15,7 @@ from geometry_msgs.msg import Vector3Stamped
 
 from kite_rto.gma import HistoryStore
 from kite_rto.nodes.interface import MEASUREMENTS, stamp_to_ns
+from kite_rto.tools.compare_pure import compare_histories
 
 from rosutil import Probe, start_node, stop
 
@@ -79,9 +80,12 @@ def test_graph_flies_the_pure_runners_sequence(probe, ros_env, tmp_path, plant_p
     print("setpoints ROS - pure (rad):", ros_c - [e.c for e in pure.experiments], "costs ROS - pure (kN):",
           np.subtract(ros_cost, [e.outcome.cost for e in pure.experiments]),
           "iterates ROS - pure (rad):", ros_next - pure.iterates[1:])
+    diffs = compare_histories(history, pure.history)
+    print(f"{len(diffs)} fields differ from the pure runner:", *diffs[:40], sep="\n  ")
     np.testing.assert_array_equal(ros_c, [e.c for e in pure.experiments])
     np.testing.assert_array_equal(ros_cost, [e.outcome.cost for e in pure.experiments])
     np.testing.assert_array_equal(ros_next, pure.iterates[1:])
+    assert not diffs, "the stored history differs from the pure runner's (see the printed fields)"
     assert f"done: {n_iter} iterations" in out
     assert "no optimizer in the graph" not in ctrl_out, ctrl_out      # never released a sample unsynchronized
     stamps = np.array([s for s, _ in estimates])
