@@ -4,7 +4,7 @@ import random
 
 import pytest
 
-if "KITE_RTO_TEST_DOMAIN" not in os.environ:
+if not os.environ.get("KITE_RTO_TEST_DOMAIN"):            # unset or empty
     # One domain per pytest process, chosen from the pid so parallel runs on one machine do not hear each other.
     os.environ["KITE_RTO_TEST_DOMAIN"] = str(random.Random(os.getpid()).randint(1, 100))
 os.environ["ROS_DOMAIN_ID"] = os.environ["KITE_RTO_TEST_DOMAIN"]
