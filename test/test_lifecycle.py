@@ -72,7 +72,7 @@ def test_pause_hold_manual_setpoint_resume(probe, ros_env, tmp_path):
         code, out = ctl(ros_env, "state")
         assert (code, out.strip()) == (0, "unconfigured"), out
         code, out = ctl(ros_env, "activate")                      # not possible from unconfigured
-        assert code == 1 and "activate refused" in out, out
+        assert code == 1 and "activate refused: the optimizer is unconfigured" in out, out
         assert ctl(ros_env, "configure") == (0, "configure: unconfigured -> inactive\n")
         assert ctl(ros_env, "resume") == (0, "activate: inactive -> active\n")
         assert probe.spin_until(lambda: w.setpoints, 300.0), "no setpoints after configure + activate"

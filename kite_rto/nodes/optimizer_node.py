@@ -129,7 +129,7 @@ class OptimizerNode(LifecycleNode):
     # ------------------------------------------------------------ lifecycle
     def _transition(self, label: str, goal: str, action) -> TransitionCallbackReturn:
         """Run ``action()`` for the transition ``label`` to ``goal``, store it in the event log, log it."""
-        start = self.state
+        start, t = self.state, self._sim_time()
         try:
             action()
         except ParameterError as err:
@@ -140,7 +140,6 @@ class OptimizerNode(LifecycleNode):
             self.get_logger().error(f"{label} failed: {err!r}")
             return TransitionCallbackReturn.FAILURE
         self.state = goal
-        t = None if self.run is None or self.run.join.last is None else self.run.join.last * 1e-9
         if self.store is not None:
             try:
                 self.store.save_progress(events=[transition_event(label, start, goal, t)])
@@ -149,6 +148,11 @@ class OptimizerNode(LifecycleNode):
         self.get_logger().info(f"lifecycle: {label}: {start} -> {goal}")
         self.publish_status()
         return TransitionCallbackReturn.SUCCESS
+
+    def _sim_time(self) -> float | None:
+        """Sim time of the last sample the run processed, s (None before the first)."""
+        last = None if self.run is None else self.run.join.last
+        return None if last is None or last < 0 else last * 1e-9
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Open the database (again after a cleanup) and start building GMA on the worker thread; returns at once
@@ -351,7 +355,7 @@ class OptimizerNode(LifecycleNode):
             why = (f"the optimizer is {self.state}{' (still building)' if self.run is None else ''}: manual "
                    "setpoints are taken only while it is inactive (kite_ctl pause)")
         else:
-            why = self.run.manual_setpoints(values, None if self.run.join.last is None else self.run.join.last * 1e-9)
+            why = self.run.manual_setpoints(values, self._sim_time())
         if why:
             if self.run is not None:
                 self.run.manual_note = f"refused: {why}"

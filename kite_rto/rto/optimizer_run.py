@@ -212,7 +212,8 @@ class OptimizerRun:
         held = "nothing yet" if self.c_published is None else _degrees(self.c_published)
         if not self.done:
             self.phase = f"paused: holding {held}"
-        self.log.info(f"paused: holding {held}; the experiment in progress is discarded")
+        self.log.info(f"paused: holding {held}; " + ("the run has ended" if self.done else
+                                                     "the experiment in progress is discarded"))
         self._status()
 
     def resume(self) -> None:

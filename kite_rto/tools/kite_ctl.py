@@ -38,6 +38,8 @@ __all__ = ["ALIASES", "COMMANDS", "main"]
 
 TRANSITIONS = ("configure", "activate", "deactivate", "cleanup", "shutdown")
 ALIASES = {"pause": "deactivate", "resume": "activate"}
+GOALS = {"configure": "inactive", "activate": "active", "deactivate": "inactive", "cleanup": "unconfigured",
+         "shutdown": "finalized"}
 COMMANDS = ("state", *TRANSITIONS, *ALIASES, "setpoint")
 
 
@@ -93,11 +95,9 @@ class Ctl:
     def transition(self, label: str) -> str:
         before = self.state()
         ok = self.call(ChangeState, "change_state", ChangeState.Request(transition=Transition(label=label))).success
-        after = self.state()
         if not ok:
-            raise CtlError(f"{label} refused: the optimizer is {before} (now {after}); see `kite_ctl state` and its "
-                           "log")
-        return f"{label}: {before} -> {after}"
+            raise CtlError(f"{label} refused: the optimizer is {self.state()} (was {before}); see its log")
+        return f"{label}: {before} -> {GOALS[label]}"      # not asked again: after shutdown the optimizer exits
 
     def setpoint(self, deg) -> str:
         """Publish manual setpoints (deg in, rad on the topic) and wait for the optimizer's verdict on /rto/status."""
