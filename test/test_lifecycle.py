@@ -91,8 +91,10 @@ def test_pause_hold_manual_setpoint_resume(probe, ros_env, tmp_path):
         t_pause, n_setpoints, done_before = w.t, len(w.setpoints), stored(db)[1]["experiments"]
         held = w.setpoints[-1]
         assert probe.spin_until(lambda: w.t > t_pause + HOLD + 2.0, 600.0), "the lockstep loop stalled while paused"
+        # every /rto/sync the probe heard over the 60 s carries the held setpoints (a busy probe may miss some; the
+        # plant's clock passing t_pause + 60 s in lockstep shows that the controller got them all)
         during = [c for s, c in w.sync if t_pause + 1.0 < s <= t_pause + HOLD]
-        assert len(during) > 0.9 * HOLD / 0.02, f"{len(during)} samples synced in {HOLD} s paused"
+        assert during and max(s for s, _ in w.sync) > t_pause + HOLD - 1.0, "no /rto/sync while paused"
         assert all(np.array_equal(c, held) for c in during), "the setpoints changed while paused"
         assert len(w.setpoints) == n_setpoints and stored(db)[1]["experiments"] == done_before == 1
 
