@@ -30,6 +30,7 @@ setup(
             # operator tools (kite_ prefix: no clash with shell commands such as echo in a venv's bin/)
             "kite_monitor = kite_rto.tools.monitor:main",
             "kite_echo = kite_rto.tools.echo:main",
+            "kite_ctl = kite_rto.tools.kite_ctl:main",
             "kite_record = kite_rto.nodes.entry:kite_record",
             "kite_report = kite_rto.tools.rto_report:main",
             "kite_demo = kite_rto.tools.demo:main",

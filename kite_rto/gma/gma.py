@@ -229,13 +229,44 @@ class GMA:
 
     def _plan(self) -> None:
         """Plan the experiments of iteration ``k``: the nominal point, then the strategy's perturbations."""
+        self.history.pending = self._requests(self._c, f"k{self._k}")
+
+    def _requests(self, c: np.ndarray, tag: str) -> list[ExperimentRequest]:
+        """The requests of the open iteration at operating point ``c`` (nominal first), ids ``<tag>-<j>-...``."""
         pr, s, k = self.problem, self.settings, self._k
         past = self._points(exclude_iteration=k)
-        cs = [self._c.copy()] + [np.asarray(c, float) for c in self.gradient.plan(self._c, pr.c_lb, pr.c_ub, past)]
-        self.history.pending = [
-            ExperimentRequest(f"k{k}-{j}-{'nominal' if j == 0 else 'perturbation'}", c,
-                              "nominal" if j == 0 else "perturbation", k, s.settle_time, s.averaging)
-            for j, c in enumerate(cs)]
+        cs = [c.copy()] + [np.asarray(x, float) for x in self.gradient.plan(c, pr.c_lb, pr.c_ub, past)]
+        return [ExperimentRequest(f"{tag}-{j}-{'nominal' if j == 0 else 'perturbation'}", x,
+                                  "nominal" if j == 0 else "perturbation", k, s.settle_time, s.averaging)
+                for j, x in enumerate(cs)]
+
+    def plan_at(self, c) -> list[ExperimentRequest]:
+        """An operator's operating point: the requests the open iteration ``k`` would have at ``c`` (n_c,), inside
+        the setpoint box, without changing anything (pass them to :meth:`replace_plan` once they are stored).
+
+        Ids are ``k<k>m<n>-<j>-nominal|perturbation``, ``n`` = 1 + the operator points already given in iteration
+        ``k``, so they never repeat a stored id. ``ValueError`` names a ``c`` of the wrong size, not finite or
+        outside the box."""
+        pr = self.problem
+        c = np.asarray(c, float).ravel()
+        if c.size != pr.n_c or not np.all(np.isfinite(c)):
+            raise ValueError(f"GMA.plan_at: c = {c.tolist()}: expected {pr.n_c} finite values")
+        if np.any(c < pr.c_lb) or np.any(c > pr.c_ub):
+            raise ValueError(f"GMA.plan_at: c = {c.tolist()}: outside the setpoint box [{pr.c_lb.tolist()}, "
+                             f"{pr.c_ub.tolist()}]")
+        k = self._k
+        ids = [q.request_id for q, _ in self.history.experiments] + [q.request_id for q in self.history.pending]
+        moves = {i.split("-")[0] for i in ids if i.startswith(f"k{k}m")}
+        return self._requests(c, f"k{k}m{len(moves) + 1}")
+
+    def replace_plan(self, requests: list[ExperimentRequest]) -> None:
+        """Continue the open iteration from the nominal point of ``requests`` (from :meth:`plan_at`): it becomes
+        ``c_k``; experiments of the iteration finished at the old point stay in the history, unused by it."""
+        if not requests or requests[0].purpose != "nominal" or any(q.iteration != self._k for q in requests):
+            raise ValueError(f"GMA.replace_plan: expected the requests of iteration {self._k}, nominal first "
+                             f"(from plan_at), got {[q.request_id for q in requests]}")
+        self._c = np.asarray(requests[0].c, float).copy()
+        self.history.pending = deepcopy(requests)
 
     def _resume(self) -> None:
         h, n_c, n_g = self.history, self.problem.n_c, self.problem.n_g
@@ -257,7 +288,10 @@ class GMA:
             raise ValueError(f"GMA: history has {self._c.size} setpoints, the problem has n_c={n_c}")
         if not h.pending or h.pending[0].iteration != self._k:
             self._plan()
-        elif not self.pending_requests():
+            return
+        if h.pending[0].purpose == "nominal":       # the open iteration's point (an operator's, see replace_plan)
+            self._c = np.asarray(h.pending[0].c, float).copy()
+        if not self.pending_requests():
             self._complete()
 
     def _complete(self) -> IterationRecord:

@@ -35,8 +35,11 @@ CREATE TABLE IF NOT EXISTS experiments (seq INTEGER PRIMARY KEY AUTOINCREMENT, r
     wall_time REAL NOT NULL);
 CREATE TABLE IF NOT EXISTS iterations (k INTEGER PRIMARY KEY, record TEXT NOT NULL, wall_time REAL NOT NULL);
 CREATE TABLE IF NOT EXISTS pending (k INTEGER PRIMARY KEY CHECK (k = 0), requests TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS events (seq INTEGER PRIMARY KEY AUTOINCREMENT, kind TEXT NOT NULL, data TEXT NOT NULL,
+    wall_time REAL NOT NULL);
 """
-_TABLES = {"meta", "experiments", "iterations"}        # a history has at least these (older files lack pending)
+_TABLES = {"meta", "experiments", "iterations"}        # a history has at least these (older files lack pending,
+                                                        # events: created at their first write)
 _BUSY_TIMEOUT = 10.0                                    # s: wait for another connection's write to end
 
 
@@ -166,7 +169,8 @@ class HistoryStore:
         return self._ro
 
     # ------------------------------------------------------------------ write
-    def save_progress(self, experiments=(), records=(), pending=None, meta: dict | None = None) -> None:
+    def save_progress(self, experiments=(), records=(), pending=None, meta: dict | None = None,
+                      events=()) -> None:
         """Store finished experiments, completed iterations, the open iteration's requests and run data, all in ONE
         transaction: everything or, when it fails, nothing.
 
@@ -175,12 +179,15 @@ class HistoryStore:
             records: :class:`IterationRecord` s.
             pending: the requests of the open iteration (None: unchanged).
             meta: free run data (problem, settings, ``c0``), key by key.
+            events: ``(kind, data)`` pairs appended to the run's event log (operator actions: lifecycle
+                transitions, manual setpoints; ``data`` a JSON-able dict), see :meth:`events`.
 
         An experiment or iteration already stored with the same content is skipped (a repeated write changes
         nothing); one stored with other content raises :class:`StoreError` (two runs in one file). A failed write
         (disk full, I/O error) raises :class:`StoreError` naming the file and the cause; the store stays usable.
         """
-        kind = "iteration" if records else "experiment" if experiments else "start"
+        kind = ("iteration" if records else "experiment" if experiments else
+                "event" if events and pending is None and not meta else "start")
         try:
             db = self._writer()
             with db:
@@ -194,6 +201,8 @@ class HistoryStore:
                 if pending is not None:
                     db.execute("INSERT OR REPLACE INTO pending VALUES (0, ?)",
                                (json.dumps([q.to_dict() for q in pending], allow_nan=False),))
+                db.executemany("INSERT INTO events (kind, data, wall_time) VALUES (?, ?, ?)",
+                               [(kind_, _json(data), time.time()) for kind_, data in events])
                 if self.fault is not None:
                     self.fault.before_commit(kind)
         except sqlite3.Error as err:
@@ -267,6 +276,13 @@ class HistoryStore:
         row = db.execute("SELECT requests FROM pending").fetchone() if "pending" in self._tables(db) else None
         return History.from_dict({"c0": c0, "experiments": exps, "iterations": its,
                                   "pending": json.loads(row[0]) if row else [], "meta": meta})
+
+    def events(self) -> list[tuple[str, dict, float]]:
+        """The event log, oldest first: ``(kind, data, wall_time)`` (a file without the table: none)."""
+        db = self._reader()
+        if db is None or "events" not in self._tables(db):
+            return []
+        return [(k, json.loads(d), w) for k, d, w in db.execute("SELECT kind, data, wall_time FROM events ORDER BY seq")]
 
     def stored_keys(self) -> tuple[set, set]:
         """(request ids of the stored experiments, iteration numbers ``k`` of the stored records)."""

@@ -12,9 +12,10 @@ from dataclasses import dataclass
 
 __all__ = ["DiskFull", "WRITE_KINDS"]
 
-WRITE_KINDS = ("start", "experiment", "iteration", "any")
-"""``start``: a run's first write (its c0, settings and first requests); ``experiment``: finished experiments only;
-``iteration``: a write that holds an iteration record (with the experiment that completed it); ``any``."""
+WRITE_KINDS = ("start", "experiment", "iteration", "event", "any")
+"""``start``: a run's first write (its c0, settings and first requests), or any other write of requests or run data;
+``experiment``: finished experiments only; ``iteration``: a write that holds an iteration record (with the
+experiment that completed it); ``event``: operator events only (lifecycle transitions); ``any``."""
 
 
 @dataclass

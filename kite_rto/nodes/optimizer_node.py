@@ -10,6 +10,16 @@ time: the setpoints in force, rad, and ``updates``, the number of setpoint messa
 controller started with ``sync_optimizer:=true`` answers a sample only after its sync message, so in lockstep a
 setpoint change takes effect at the same sample as in the pure runner and the graph flies the same sequence.
 
+A ROS 2 lifecycle (managed) node (docs/interface.md *Pausing and overriding the optimizer*): ``configure`` opens the
+database and builds the NLPs and directions on a worker thread (services answer meanwhile), ``activate`` starts or
+resumes experiments, ``deactivate`` holds the setpoints in force (the kite keeps flying them; ``/rto/sync`` still
+answers every sample; the experiment in progress is flown again after ``activate``), ``cleanup`` and ``shutdown``
+close the database (``shutdown`` then ends the process, code 0). While inactive, ``/rto/manual_setpoints``
+(:data:`MANUAL_SETPOINTS`, same type as ``/rto/setpoints``) hands it setpoints to continue from. Every transition
+and manual setpoint is stored in the database's event log; a restarted optimizer whose last ``activate`` /
+``deactivate`` was a ``deactivate`` comes back inactive. With ``autostart`` (default) it configures and activates
+itself at start-up.
+
 Storage (docs/storage.md): a damaged database, one that holds a run while ``resume`` is false, or one made with other
 settings stops the node at start-up with exit code 2 (the file untouched); a database that stays unwritable for
 ``storage_timeout`` s stops it with exit code 3 (:data:`STORAGE_EXIT`), nothing stored lost. Test hook:
@@ -27,7 +37,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
 from rclpy.clock import Clock, ClockType
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
@@ -37,6 +47,8 @@ from ..gma.store_fault import DiskFull
 from ..kite.params import KiteParams, ParameterError
 from ..rto.builder import gma_directions, lap_problem, make_gma, model_only_optimum
 from ..rto.ocp import KiteOCPSettings
+from ..gma import StoreError
+from ..rto.operator_log import transition_event, was_paused
 from ..rto.optimizer_run import OptimizerRun
 from ..rto.run_db import SETTINGS_KEY, RunDatabaseError, open_run_database
 from ..rto.session import RTOSession
@@ -47,7 +59,11 @@ from .spin import request_exit, run_node
 from .stop_signals import STOP
 from .topics import CRASHES, POSITION, SETPOINTS, STATE, STATUS, SYNC, SYNC_NAMES, TENSION, WIND, WIND_ESTIMATE
 
-__all__ = ["OptimizerNode", "PARAMS", "STORAGE_EXIT", "STORE_FULL_ENV", "main"]
+__all__ = ["MANUAL_SETPOINTS", "OptimizerNode", "PARAMS", "STORAGE_EXIT", "STORE_FULL_ENV", "main"]
+
+MANUAL_SETPOINTS = "/rto/manual_setpoints"
+"""Operator setpoints (sensor_msgs/JointState like /rto/setpoints, rad), taken only while the node is inactive.
+(To move into topics.py with the other names.)"""
 
 STORAGE_EXIT = 3
 """Exit code of an optimizer that could not write its database for ``storage_timeout`` s."""
@@ -56,8 +72,8 @@ STORE_FULL_ENV = "KITE_RTO_TEST_STORE_FULL"
 """Test hook ``KIND:N[:ATTEMPTS]``: the database's writes fail like a full disk (see DiskFull.parse)."""
 
 
-class OptimizerNode(Node):
-    """Runs GMA experiments on the flying kite and publishes setpoints and status."""
+class OptimizerNode(LifecycleNode):
+    """Runs GMA experiments on the flying kite and publishes setpoints and status (a lifecycle node)."""
 
     def __init__(self, **kwargs):
         super().__init__("optimizer", **kwargs)
@@ -67,9 +83,39 @@ class OptimizerNode(Node):
             raise ParameterError(f"parameter db = {v['db']!r}: expected a file in an existing directory "
                                  f"({db_dir} is not one)")
         self.settings = settings_from_params(v)
+        self.store = None
+        self._open_database(v["resume"])
+        self.run = None                        # the GMA run, once built (see _build)
+        self.state = "unconfigured"            # the lifecycle state (also on /rto/status)
+        self.starting = "unconfigured: waiting for configure"  # what the start-up is doing (status meanwhile)
+        self.pub_status = self.create_publisher(DiagnosticArray, STATUS, RELIABLE_10)
+        self.create_subscription(JointState, MANUAL_SETPOINTS, self.manual_callback, RELIABLE_10)
+        self.manual_received = 0               # manual setpoint messages handled (status: an operator tool waits on it)
+        self.create_timer(1.0, self._every_second, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._builder = None
+        self._build_timer = None
+        self._start_ticks = 0                  # _finish_start calls while starting (status every 5th)
+        self._cancel = threading.Event()       # cleanup / destroy_node: the worker stops at its next step
+        self._gma_ready = threading.Event()
+        paused = was_paused(self.store.events())
+        if v["autostart"]:
+            self.trigger_configure()
+            if paused:
+                self.get_logger().warning(f"autostart: {v['db']} says this run was paused (its last transition is a "
+                                          "deactivate): staying inactive, holding its setpoints; activate to go "
+                                          "on (kite_ctl resume, or ros2 lifecycle set /optimizer activate)")
+            else:
+                self.trigger_activate()
+        elif paused:
+            self.get_logger().info(f"{v['db']} says this run was paused: configure, then activate to go on")
+        self.publish_status()
+
+    def _open_database(self, resume: bool) -> None:
+        """Open ``db`` (refusals: :class:`ParameterError`, exit 2 at start-up) and keep the history to resume."""
+        v = self.p
         try:
             fault = DiskFull.parse(os.environ[STORE_FULL_ENV]) if os.environ.get(STORE_FULL_ENV) else None
-            self.store, history, note = open_run_database(v["db"], run_settings(v), v["resume"], fault=fault)
+            self.store, self._history, note = open_run_database(v["db"], run_settings(v), resume, fault=fault)
         except RunDatabaseError as err:
             raise ParameterError(str(err)) from None
         except ValueError as err:
@@ -79,24 +125,104 @@ class OptimizerNode(Node):
         if fault is not None:
             self.get_logger().warning(f"{STORE_FULL_ENV} = {os.environ[STORE_FULL_ENV]}: writes to {v['db']} "
                                       f"fail like a full disk from {fault.kind} write {fault.nth} on (test hook)")
-        self.run = None                        # the GMA run, once built (see _build)
-        self.starting = "starting"             # what the start-up is doing (``/rto/status`` phase meanwhile)
-        self.pub_status = self.create_publisher(DiagnosticArray, STATUS, RELIABLE_10)
-        self.create_timer(1.0, self._every_second, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    # ------------------------------------------------------------ lifecycle
+    def _transition(self, label: str, goal: str, action) -> TransitionCallbackReturn:
+        """Run ``action()`` for the transition ``label`` to ``goal``, store it in the event log, log it."""
+        start, t = self.state, self._sim_time()
+        try:
+            action()
+        except ParameterError as err:
+            print(f"[kite_rto] refusing to start: {err}", file=sys.stderr, flush=True)
+            request_exit(self, 2)
+            return TransitionCallbackReturn.FAILURE
+        except Exception as err:  # noqa: BLE001 - rclpy would swallow it silently
+            self.get_logger().error(f"{label} failed: {err!r}")
+            return TransitionCallbackReturn.FAILURE
+        self.state = goal
+        if self.store is not None:
+            try:
+                self.store.save_progress(events=[transition_event(label, start, goal, t)])
+            except StoreError as err:
+                self.get_logger().error(f"{label}: not stored in the event log: {err}")
+        self.get_logger().info(f"lifecycle: {label}: {start} -> {goal}")
         self.publish_status()
-        # The NLP builds and the model's optimum and directions take seconds (10-14 s when nothing is cached): they
-        # run on a worker thread, so parameter services and the status answer from the first second. Once GMA
-        # exists (its first experiment needs no NLP) the executor starts flying while the worker creates GMA's
-        # NLPs, which the first iteration's end needs (GMA.prepare; a thread that needs them earlier waits).
-        self._built = None
-        self._history = history
-        self._gma_ready = threading.Event()
-        self._start_ticks = 0                  # _finish_start calls while starting (status every 5th)
-        self._cancel = threading.Event()       # destroy_node: the worker stops at its next step
-        self._builder = threading.Thread(target=self._build, args=(history,), name="optimizer-build", daemon=True)
-        self._builder.start()
-        self._build_timer = self.create_timer(0.05, self._finish_start,
-                                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+        return TransitionCallbackReturn.SUCCESS
+
+    def _sim_time(self) -> float | None:
+        """Sim time of the last sample the run processed, s (None before the first)."""
+        last = None if self.run is None else self.run.join.last
+        return None if last is None or last < 0 else last * 1e-9
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Open the database (again after a cleanup) and start building GMA on the worker thread; returns at once
+        (the node is inactive while it builds, /rto/status says what it builds)."""
+        def configure():
+            if self.store is None:
+                self._open_database(True)      # this process's own run (or a new one): resume it
+            self._cancel.clear()
+            self._gma_ready.clear()
+            self._built = None
+            self._start_ticks = 0
+            self.starting = "starting"
+            # The NLP builds and the model's optimum and directions take seconds (10-14 s when nothing is cached):
+            # they run on a worker thread, so the services and the status answer from the first second. Once GMA
+            # exists (its first experiment needs no NLP) the executor starts flying while the worker creates GMA's
+            # NLPs, which the first iteration's end needs (GMA.prepare; a thread that needs them earlier waits).
+            self._builder = threading.Thread(target=self._build, args=(self._history,), name="optimizer-build",
+                                             daemon=True)
+            self._builder.start()
+            self._build_timer = self.create_timer(0.05, self._finish_start,
+                                                  clock=Clock(clock_type=ClockType.STEADY_TIME))
+        return self._transition("configure", "inactive", configure)
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Start or resume experiments (still building: once built)."""
+        return self._transition("activate", "active", lambda: self.run is not None and self.run.resume())
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Hold the setpoints in force; the experiment in progress is discarded, flown again after activate."""
+        return self._transition("deactivate", "inactive", lambda: self.run is not None and self.run.pause())
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Drop the run and close the database (configure builds it again from the database)."""
+        result = self._transition("cleanup", "unconfigured", self._stop_build)
+        self._close()
+        return result
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Drop the run, close the database and end the process (code 0) half a second later."""
+        result = self._transition("shutdown", "finalized", self._stop_build)
+        self._close()
+        self._exit_timer = self.create_timer(0.5, lambda: request_exit(self, 0),
+                                             clock=Clock(clock_type=ClockType.STEADY_TIME))
+        return result
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.get_logger().error(f"lifecycle error in state {state.label}")
+        return TransitionCallbackReturn.FAILURE
+
+    def _stop_build(self) -> None:
+        """Stop the worker at its next step and wait for it (CasADi must not run on two threads), drop the run."""
+        self._cancel.set()
+        if self._builder is not None:
+            self._builder.join(120.0)
+        if self._build_timer is not None:
+            self._build_timer.cancel()
+        for name in ("pub_setpoints", "pub_sync", "pub_wind_estimate"):
+            if getattr(self, name, None) is not None:
+                self.destroy_publisher(getattr(self, name))
+                setattr(self, name, None)
+        for sub in getattr(self, "_run_subs", ()):
+            self.destroy_subscription(sub)
+        self._run_subs = []
+        self.run = None
+        self.starting = "unconfigured: waiting for configure"
+
+    def _close(self) -> None:
+        if self.store is not None:
+            self.store.close()
+            self.store = None
 
     def _build(self, history) -> None:
         """Worker thread: the model's problem, optimum, directions and GMA (disk-cached where possible), then
@@ -148,6 +274,8 @@ class OptimizerNode(Node):
             return
         self._build_timer.cancel()
         built = self._built
+        if self._cancel.is_set():               # cleaned up meanwhile
+            return
         if isinstance(built, ParameterError):
             print(f"[kite_rto] refusing to start: {built}", file=sys.stderr, flush=True)
             return request_exit(self, 2)
@@ -166,17 +294,20 @@ class OptimizerNode(Node):
                                 storage_lost=lambda: request_exit(self, STORAGE_EXIT),
                                 storage_timeout=v["storage_timeout"], run_meta={SETTINGS_KEY: run_settings(v)})
         self.session = self.run.session
-        self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10)
-        self.create_subscription(WrenchStamped, TENSION, self.tension_callback, RELIABLE_10)
-        self.create_subscription(PointStamped, POSITION, self.position_callback, RELIABLE_10)
-        self.create_subscription(Vector3Stamped, WIND, self.wind_callback, RELIABLE_10)
-        self.create_subscription(UInt32, CRASHES, self.crashes_callback, LATCHED)
+        self._run_subs = [
+            self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10),
+            self.create_subscription(WrenchStamped, TENSION, self.tension_callback, RELIABLE_10),
+            self.create_subscription(PointStamped, POSITION, self.position_callback, RELIABLE_10),
+            self.create_subscription(Vector3Stamped, WIND, self.wind_callback, RELIABLE_10),
+            self.create_subscription(UInt32, CRASHES, self.crashes_callback, LATCHED)]
         first = self.gma.next_request()
         if history is not None:
             self.get_logger().info(f"resumed from {v['db']}: {len(history.experiments)} experiments, "
                                    f"{len(history.iterations)} iterations")
         self.run.begin()                     # stores a new run's start first; publishes nothing until it is stored
-        self.get_logger().info(f"optimizer up: first experiment {first.request_id}")
+        if self.state != "active":
+            self.run.pause()                 # configured, not activated: hold the first (or the paused) setpoints
+        self.get_logger().info(f"optimizer up ({self.state}): first experiment {first.request_id}")
 
     def apply_params(self, changes: dict) -> None:
         """Runtime parameters: ``n_iter`` (checked at every sample) and ``exit_when_done`` (checked when done).
@@ -212,6 +343,26 @@ class OptimizerNode(Node):
 
     def crashes_callback(self, msg: UInt32) -> None:
         self.run.crashes(int(msg.data))
+
+    def manual_callback(self, msg: JointState) -> None:
+        """Operator setpoints (rad, names as /rto/setpoints), taken only while inactive; a refusal is a throttled
+        warning naming the value and what was expected (and ``manual_setpoints`` on /rto/status)."""
+        self.manual_received += 1
+        names, values = list(msg.name), [float(x) for x in msg.position]
+        if names != Setpoints.names() or len(values) != 3:
+            why = (f"names {names}, values {values}: expected names {Setpoints.names()} with 3 values (rad)")
+        elif self.run is None or self.state != "inactive":
+            why = (f"the optimizer is {self.state}{' (still building)' if self.run is None else ''}: manual "
+                   "setpoints are taken only while it is inactive (kite_ctl pause)")
+        else:
+            why = self.run.manual_setpoints(values, self._sim_time())
+        if why:
+            if self.run is not None:
+                self.run.manual_note = f"refused: {why}"
+                self.run.reject("manual", f"refusing manual setpoints: {why}")
+            else:
+                self.get_logger().warning(f"refusing manual setpoints: {why}", throttle_duration_sec=2.0)
+        self.publish_status()
 
     # ----------------------------------------------------------------- output
     def finished(self) -> None:
@@ -262,6 +413,8 @@ class OptimizerNode(Node):
                 else DiagnosticStatus.OK
             st.message = self.run.phase
             st.values = [KeyValue(key=k, value=str(v)) for k, v in self.run.status_values().items()]
+        st.values += [KeyValue(key="lifecycle", value=self.state),
+                      KeyValue(key="manual_received", value=str(self.manual_received))]
         msg = DiagnosticArray(status=[st])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_status.publish(msg)
@@ -271,9 +424,9 @@ class OptimizerNode(Node):
         # (a test or a composed process going on): let it finish its current step (seconds) before going on,
         # unless the process is stopping on a signal (run_node then ends it without waiting for the worker).
         self._cancel.set()
-        if STOP.signum is None:
+        if STOP.signum is None and self._builder is not None:
             self._builder.join(120.0)
-        self.store.close()
+        self._close()
         return super().destroy_node()
 
 

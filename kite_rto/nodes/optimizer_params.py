@@ -23,6 +23,9 @@ PARAMS = (
               "one; a run's settings must match the stored ones to resume it)"),
     ParamSpec("storage_timeout", 60.0, "wall time the optimizer holds its setpoints and retries when it cannot "
               "write the database (disk full, I/O error) before it stops with exit code 3", 1.0, 86400.0, unit="s"),
+    ParamSpec("autostart", True, "configure and activate at start-up (a lifecycle node that manages itself); "
+              "false: wait unconfigured for lifecycle transitions (ros2 lifecycle set, kite_ctl). A run whose "
+              "database says it was paused comes back inactive either way"),
     ParamSpec("n_iter", 10, "GMA iterations to run, then hold the last setpoints (0 = no limit)", 0, 10000,
               unit="iterations", runtime=True),
     ParamSpec("exit_when_done", False, "exit (code 0) once n_iter iterations are done (needs n_iter > 0)",
@@ -60,7 +63,7 @@ PARAMS = (
 )
 
 
-RUN_INDEPENDENT = ("db", "resume", "storage_timeout", "n_iter", "exit_when_done")
+RUN_INDEPENDENT = ("db", "resume", "storage_timeout", "autostart", "n_iter", "exit_when_done")
 """Parameters that do not change what a stored experiment or iteration means (every other one is stored with a
 new run and must match to resume it)."""
 

@@ -15,6 +15,13 @@ used), and tries again at the next sample (at most every :data:`RETRY_PERIOD` s)
 once stored, the held experiment starts from that sample. After ``storage_timeout`` s of failed writes it gives up
 (``storage_lost``). What is stored is compared with memory by request id and iteration number, so an iteration
 that GMA completes again on resume (its last experiment stored, its record not) is written too.
+
+Operator (the node's lifecycle, docs/interface.md *Pausing and overriding the optimizer*): :meth:`OptimizerRun.pause`
+holds the setpoints in force and discards the experiment in progress (samples are still synchronized, nothing is
+measured); :meth:`OptimizerRun.manual_setpoints` (only while paused) checks setpoints against the box and the turn
+limit, stores them with the open iteration re-planned at them and publishes them; :meth:`OptimizerRun.resume`
+flies the open iteration's next experiment from the next sample on (the discarded one again, or the manual point's
+nominal experiment).
 """
 from __future__ import annotations
 
@@ -24,10 +31,11 @@ import time
 import numpy as np
 
 from ..flight.path import SetpointError, validate_setpoints
-from ..flight.shape import setpoints_from_shape
+from ..flight.shape import setpoints_from_shape, shape_from_setpoints
 from ..flight.sample_join import RejectLog, SampleJoin, reading_error, state_values
 from ..gma import StoreError
 from ..kite.params import KiteParams
+from .operator_log import MANUAL
 
 __all__ = ["OptimizerRun", "RETRY_PERIOD", "shape_degrees", "vector_text"]
 
@@ -38,6 +46,11 @@ RETRY_PERIOD = 0.5
 def shape_degrees(x) -> str:
     """Setpoints in degrees of GMA's shape coordinates ``x``."""
     return "(" + ", ".join(f"{math.degrees(v):.2f}" for v in setpoints_from_shape(x)) + ") deg"
+
+
+def _degrees(c) -> str:
+    """Setpoints ``c`` (rad) in degrees."""
+    return "(" + ", ".join(f"{math.degrees(v):.2f}" for v in c) + ") deg"
 
 
 def vector_text(v) -> str:
@@ -79,6 +92,9 @@ class OptimizerRun:
         self._started = False
         self.done = False
         self.phase = "waiting for the plant"
+        self.active = True                  # False while paused (the node inactive): setpoints held
+        self._moved = False                 # an operator moved the open iteration while paused
+        self.manual_note = ""               # the last manual setpoints: accepted or why refused
 
     def begin(self) -> None:
         """Store what memory holds and the store lacks (a new run's start; an iteration GMA completed again on
@@ -138,6 +154,11 @@ class OptimizerRun:
     def on_sample(self, m) -> None:
         if self.done:
             return
+        if not self.active:                 # paused: the held setpoints fly, nothing is measured
+            if self._failing_since is not None:
+                self._store()
+            self.session.evaluator.update(m)        # an inactive evaluator only follows the wind
+            return
         if self._failing_since is not None and not self._store():
             return                          # records unstored: the held setpoints fly, nothing is measured
         if self._held:                      # stored at last: what the session asked for starts now
@@ -178,6 +199,92 @@ class OptimizerRun:
             self.setpoints(new)
             if restart and not self.done:
                 self.session.evaluator.start(t, self.session.c)
+
+    # ----------------------------------------------------------------- operator
+    def pause(self) -> None:
+        """Hold the setpoints in force; the experiment in progress is discarded (flown again after :meth:`resume`)."""
+        if not self.active:
+            return
+        self.active = False
+        self.session.evaluator.active = False
+        if not self._held:
+            self._started = False
+        held = "nothing yet" if self.c_published is None else _degrees(self.c_published)
+        if not self.done:
+            self.phase = f"paused: holding {held}"
+        self.log.info(f"paused: holding {held}; " + ("the run has ended" if self.done else
+                                                     "the experiment in progress is discarded"))
+        self._status()
+
+    def resume(self) -> None:
+        """Go on from the next sample: the discarded experiment again, or the manual point's first experiment."""
+        if self.active:
+            return
+        self.active = True
+        if self._moved:
+            self._moved = False
+            self.session.request = None     # the next sample starts GMA's next request (the manual point's)
+        if not self.done:
+            self.phase = "resuming: the next sample starts the experiment"
+        self.log.info(f"resumed: the next sample starts experiment {self.gma.next_request().request_id}"
+                      if not self.done else "resumed: the run has ended, holding its last setpoints")
+        self._status()
+
+    def manual_setpoints(self, c, t: float | None = None) -> str:
+        """An operator's setpoints ``c`` = (theta_0, A_phi, A_theta) rad while paused, at sim time ``t`` s.
+
+        Checked like GMA's own (the safe box, the turn limit, the optimizer's shape box); accepted ones are stored
+        with the open iteration re-planned at them (GMA continues from them: they become ``c_k``), in one
+        transaction, then published. Returns "" when accepted, else the reason (nothing changed)."""
+        why = self._manual_error(c)
+        if why:
+            self.manual_note = f"refused: {why}"
+            return why
+        x = shape_from_setpoints(np.asarray(c, dtype=float))
+        try:
+            requests = self.gma.plan_at(x)
+        except ValueError as err:
+            self.manual_note = f"refused: {err}"
+            return str(err)
+        c_new = [float(v) for v in setpoints_from_shape(x)]
+        try:
+            self.store.save_progress(pending=requests, events=[(MANUAL, {
+                "c": c_new, "x": [float(v) for v in x], "requests": [q.request_id for q in requests], "t": t})])
+        except StoreError as err:
+            self.manual_note = f"refused: not stored: {err}"
+            return f"not stored: {err}"
+        self.gma.replace_plan(requests)
+        self._moved = True
+        self.setpoints(c_new)
+        self.manual_note = f"accepted {_degrees(c_new)}"
+        if not self.done:
+            self.phase = f"paused: holding {_degrees(c_new)} (manual)"
+        self.log.info(f"manual setpoints {_degrees(c_new)} stored and published; on resume GMA continues from them "
+                      f"(experiment {requests[0].request_id})")
+        self._status()
+        return ""
+
+    def _manual_error(self, c) -> str:
+        if self.active:
+            return "the optimizer is active: deactivate (pause) it first"
+        if self.done:
+            return f"the run has ended ({self.phase})"
+        if self._failing_since is not None or self._held:
+            return f"the database cannot be written ({self.storage_error})"
+        try:
+            c = np.asarray(c, dtype=float)
+            if c.shape != (3,):
+                raise SetpointError(f"setpoints = {c.tolist()}: expected 3 values (theta_0, A_phi, A_theta) rad")
+            validate_setpoints(c, self.box, KiteParams())
+        except (SetpointError, ValueError, TypeError) as err:
+            return str(err)
+        x, lb, ub = shape_from_setpoints(c), self.gma.problem.c_lb, self.gma.problem.c_ub
+        for name, v, lo, hi, deg in zip(("theta_0", "A_phi", "aspect"), x, lb, ub, (True, True, False)):
+            if not lo <= v <= hi:
+                f = (lambda a: f"{math.degrees(a):.4g} deg") if deg else (lambda a: f"{a:.4g}")
+                return (f"setpoints {_degrees(c)}: shape coordinate {name} = {f(v)}: outside the optimizer's box "
+                        f"[{f(lo)}, {f(hi)}]")
+        return ""
 
     # ------------------------------------------------------------------ storage
     def _unstored(self) -> tuple[list, list]:
@@ -274,6 +381,8 @@ class OptimizerRun:
         req = self.session.request
         kv = {"iteration": len(self.gma.records), "phase": self.phase,
               "experiments_done": len(self.gma.history.experiments)}
+        if self.manual_note:
+            kv["manual_setpoints"] = self.manual_note
         if self.storage_error:
             kv["storage_error"] = self.storage_error
         if req is not None:

@@ -10,12 +10,15 @@ import time
 from pathlib import Path
 
 import rclpy
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState
 from rclpy.signals import SignalHandlerOptions
 
 from ..nodes.topics import STATE
 from .graph import NodeProcess
 
-__all__ = ["ros_init", "plant_params", "start_recorder", "recorder_summary", "spin_until", "warn_if_domain_busy"]
+__all__ = ["ros_init", "plant_params", "start_recorder", "recorder_summary", "spin_until", "warn_if_domain_busy",
+           "lifecycle"]
 
 GRAPH_NODES = ("plant", "controller", "optimizer", "echo_pilot")
 
@@ -97,3 +100,17 @@ def recorder_summary(procs) -> None:
             said = [ln for ln in p.lines if "wrote" in ln]
             print(f"  {said[-1].strip()}" if said else f"  the recorder said nothing; see nodes.log (exit code "
                   f"{p.proc.returncode})", flush=True)
+
+
+def lifecycle(node, label: str, timeout: float = 60.0, target: str = "/optimizer") -> None:
+    """Ask ``target`` for the lifecycle transition ``label`` (``configure``, ``activate``, ...) through its standard
+    ``change_state`` service, spinning ``node``; RuntimeError when it does not answer or refuses."""
+    client = node.create_client(ChangeState, f"{target}/change_state")
+    try:
+        if not spin_until(client.service_is_ready, node, timeout):
+            raise RuntimeError(f"{target}/change_state did not answer within {timeout:g} s")
+        future = client.call_async(ChangeState.Request(transition=Transition(label=label)))
+        if not spin_until(future.done, node, timeout) or not future.result().success:
+            raise RuntimeError(f"{target} refused or did not answer the lifecycle transition {label}")
+    finally:
+        node.destroy_client(client)

@@ -11,7 +11,8 @@ import rclpy
 from ..gma import HistoryStore
 from ..rto.experiment import default_wind_source
 from ..rto.settings import KiteRTOSettings
-from .demo_graph import plant_params, recorder_summary, ros_init, spin_until, start_recorder, warn_if_domain_busy
+from .demo_graph import (lifecycle, plant_params, recorder_summary, ros_init, spin_until, start_recorder,
+                         warn_if_domain_busy)
 from .graph import GraphRun, NodeProcess
 from .progress import OptimizeProgress
 from .recorder import Recorder
@@ -43,9 +44,14 @@ def optimize(args, env, out: Path, progress) -> int:
     with GraphRun(procs, rec, log, progress) as run:
         extra = start_recorder(args, log, env, rec, procs)
         opt = NodeProcess("optimizer", {"db": str(db), "n_iter": args.iterations, "exit_when_done": True,
-                                        "wind_source": default_wind_source(args.wind_model)}, log=log, env=env)
+                                        "wind_source": default_wind_source(args.wind_model), "autostart": False},
+                          log=log, env=env)
         procs.append(opt)
         print("  starting the optimizer (builds the model's NLPs, ~10-30 s) ...", flush=True)
+        # A lifecycle node started unconfigured: the demo drives it, as `kite_ctl configure` / `activate` would
+        # (a resumed run that was paused goes on: activate resumes it).
+        lifecycle(rec, "configure")
+        lifecycle(rec, "activate")
         if not spin_until(lambda: rec.setpoints or not opt.alive(), rec, 300):
             raise RuntimeError("the optimizer published no setpoints within 300 s")
         if not opt.alive():

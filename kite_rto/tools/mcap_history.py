@@ -3,6 +3,7 @@ the flown samples, laps, setpoints and optimizer status, and the GMA history reb
 from __future__ import annotations
 
 import math
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -112,8 +113,8 @@ def history_from_mcap(data: SimpleNamespace):
             except ValueError:
                 t_start = math.nan
             try:
-                it = int(exp.split("-")[0].lstrip("k"))
-            except ValueError:
+                it = int(re.match(r"k(\d+)", exp).group(1))      # k<k>-... or an operator's k<k>m<n>-...
+            except (ValueError, AttributeError):
                 it = -1
             experiments.append([exp, kv.get("purpose", ""), it, t_start])
     if not iterations:
