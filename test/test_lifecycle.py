@@ -1,6 +1,9 @@
 """The optimizer as a lifecycle node over real DDS, driven by kite_ctl: paused mid-experiment it holds its
 setpoints while the lockstep graph flies on, takes a manual setpoint (and refuses one outside the box), resumes and
 finishes its iteration with nothing lost or repeated in the database; a restart while paused comes back paused."""
+import os
+import re
+import signal
 import subprocess
 import sys
 
@@ -80,24 +83,29 @@ def test_pause_hold_manual_setpoint_resume(probe, ros_env, tmp_path):
         assert probe.spin_until(lambda: probe.node.count_publishers("/kite/steering") > 0, 60.0)
         plant = start_node("plant", {**QUIET, "wait_subscribers": 2}, ros_env)
 
-        def mid_second_experiment():
-            return (w.status.get("experiments_done") == "1" and "experiment_t_start" in w.status
-                    and w.t > float(w.status["experiment_t_start"]) + 5.0)
-        assert probe.spin_until(mid_second_experiment, 600.0), f"no second experiment under way: {w.status}"
-        interrupted = w.status["experiment"]
-        code, out = ctl(ros_env, "pause")
-        assert (code, out) == (0, "deactivate: active -> inactive\n"), out
-        assert probe.spin_until(lambda: w.status.get("lifecycle") == "inactive", 60.0)
-        t_pause, n_setpoints, done_before = w.t, len(w.setpoints), stored(db)[1]["experiments"]
+        # Freeze the plant (SIGSTOP) as soon as the second experiment's (other) setpoints are out: the lockstep loop
+        # stops at a sample of that experiment, so the pause lands mid-experiment however slowly kite_ctl starts.
+        assert probe.spin_until(lambda: len(set(w.setpoints)) >= 2, 600.0), f"no second experiment: {w.status}"
+        os.killpg(plant.pid, signal.SIGSTOP)
+        try:
+            code, out = ctl(ros_env, "pause")
+            assert (code, out) == (0, "deactivate: active -> inactive\n"), out
+            assert probe.spin_until(lambda: w.status.get("lifecycle") == "inactive", 60.0)
+            done_before = [q.request_id for q, _ in stored(db)[0].experiments]
+        finally:
+            os.killpg(plant.pid, signal.SIGCONT)
+        t_pause, n_setpoints = w.t, len(w.setpoints)
         held = w.setpoints[-1]
         assert probe.spin_until(lambda: w.t > t_pause + HOLD + 2.0, 600.0), "the lockstep loop stalled while paused"
+        # /rto/sync comes on another topic than /clock: wait until the probe has heard it past the hold too
+        assert probe.spin_until(lambda: w.sync and w.sync[-1][0] > t_pause + HOLD + 1.0, 600.0), "no /rto/sync"
         # every /rto/sync the probe heard over the 60 s carries the held setpoints (a busy probe may miss some; the
         # plant's clock passing t_pause + 60 s in lockstep shows that the controller got them all)
         during = [c for s, c in w.sync if t_pause + 1.0 < s <= t_pause + HOLD]
         assert during and max(s for s, _ in w.sync) > t_pause + HOLD - 1.0, "no /rto/sync while paused"
         assert all(np.array_equal(c, held) for c in during), "the setpoints changed while paused"
-        assert len(w.setpoints) == n_setpoints and stored(db)[1]["experiments"] == done_before == 1
-
+        assert len(w.setpoints) == n_setpoints, "new setpoints while paused"
+        assert [q.request_id for q, _ in stored(db)[0].experiments] == done_before, "an experiment stored while paused"
         code, out = ctl(ros_env, "setpoint", "20", "50", "7.5")    # theta_0 below the box
         assert code == 1 and "theta_0" in out and "20" in out, out
         code, out = ctl(ros_env, "setpoint", *map(str, MANUAL_DEG))
@@ -116,10 +124,14 @@ def test_pause_hold_manual_setpoint_resume(probe, ros_env, tmp_path):
                 stop(p)
     history, counts, events = stored(db)
     ids = [q.request_id for q, _ in history.experiments]
+    interrupted = re.search(r"the experiment in progress \((\S+)\) is discarded", out).group(1)
     assert len(ids) == len(set(ids)), f"an experiment stored twice: {ids}"
-    assert ids[0] == "k0-0-nominal" and interrupted not in ids, ids
-    assert ids[1:] == [f"k0m1-{j}-{'nominal' if j == 0 else 'perturbation'}" for j in range(PER)], ids
-    assert counts == {"experiments": 1 + PER, "iterations": 1}
+    # the experiments finished before the pause stay; the interrupted one is gone; the manual point's iteration
+    # follows (the second experiment or, on a machine too busy to freeze the plant in time, a later one of k0)
+    assert 1 <= len(done_before) < PER and interrupted == f"k0-{len(done_before)}-perturbation", (done_before, out)
+    assert ids[:len(done_before)] == done_before and interrupted not in ids, ids
+    assert ids[len(done_before):] == [f"k0m1-{j}-{'nominal' if j == 0 else 'perturbation'}" for j in range(PER)]
+    assert counts == {"experiments": len(done_before) + PER, "iterations": 1}
     assert np.allclose(history.iterations[0].c_k, shape_from_setpoints(np.radians(MANUAL_DEG)), rtol=0, atol=1e-12)
     kinds = [(k, d.get("transition")) for k, d, _ in events]
     assert kinds == [(TRANSITION, "configure"), (TRANSITION, "activate"), (TRANSITION, "deactivate"),

@@ -212,8 +212,10 @@ class OptimizerRun:
         held = "nothing yet" if self.c_published is None else _degrees(self.c_published)
         if not self.done:
             self.phase = f"paused: holding {held}"
+        req = self.session.request
         self.log.info(f"paused: holding {held}; " + ("the run has ended" if self.done else
-                                                     "the experiment in progress is discarded"))
+                                                     "the experiment in progress is discarded" if req is None else
+                                                     f"the experiment in progress ({req.request_id}) is discarded"))
         self._status()
 
     def resume(self) -> None:
