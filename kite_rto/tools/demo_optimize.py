@@ -43,7 +43,8 @@ def optimize(args, env, out: Path, progress) -> int:
     with GraphRun(procs, rec, log, progress) as run:
         extra = start_recorder(args, log, env, rec, procs)
         opt = NodeProcess("optimizer", {"db": str(db), "n_iter": args.iterations, "exit_when_done": True,
-                                        "wind_source": default_wind_source(args.wind_model)}, log=log, env=env)
+                                        "wind_source": default_wind_source(args.wind_model)}, log=log, env=env,
+                            namespace=args.namespace)
         procs.append(opt)
         print("  starting the optimizer (builds the model's NLPs, ~10-30 s) ...", flush=True)
         if not spin_until(lambda: rec.setpoints or not opt.alive(), rec, 300):
@@ -51,11 +52,13 @@ def optimize(args, env, out: Path, progress) -> int:
         if not opt.alive():
             raise RuntimeError(f"the optimizer exited with code {opt.proc.returncode}; see {out / 'nodes.log'}")
         # Synchronized with the optimizer: the graph flies the same sequence as the pure runner (run_rto).
-        ctrl = NodeProcess("controller", {"sync_optimizer": True}, log=log, env=env)
+        ctrl = NodeProcess("controller", {"sync_optimizer": True}, log=log, env=env,
+                            namespace=args.namespace)
         procs.append(ctrl)
         spin_until(lambda: any("new setpoints" in ln for ln in ctrl.lines) or not ctrl.alive(), rec, 120)
         plant = NodeProcess("plant", plant_params(args, 3 + extra),    # controller, optimizer, demo (+ recorder, viz)
-                            log=log, env=env)
+                            log=log, env=env,
+                            namespace=args.namespace)
         procs.append(plant)
         shown = 0
         fly0 = None
