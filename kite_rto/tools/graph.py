@@ -57,9 +57,11 @@ def start_process(cmd: list, env=None, die_with_parent: bool = False) -> subproc
                             preexec_fn=_die_with_parent if die_with_parent and _PRCTL is not None else None)
 
 
-def start_node(name: str, params: dict | None = None, env=None, die_with_parent: bool = False) -> subprocess.Popen:
-    """Start a node in its own process group, output (stdout + stderr) on a text pipe."""
-    return start_process(node_command(name, params), env, die_with_parent)
+def start_node(name: str, params: dict | None = None, env=None, die_with_parent: bool = False,
+               namespace: str | None = None) -> subprocess.Popen:
+    """Start a node (in ``namespace``, default the root) in its own process group, output (stdout + stderr) on a
+    text pipe."""
+    return start_process(node_command(name, params, namespace), env, die_with_parent)
 
 
 def stop_node(proc: subprocess.Popen, timeout: float = 10.0) -> str:
