@@ -64,7 +64,7 @@ def fly(args, env, out: Path, progress: Progress) -> dict:
     from .demo_graph import plant_params, recorder_summary, ros_init, spin_until, start_recorder, warn_if_domain_busy
     from .recorder import Recorder
 
-    ros_init()
+    ros_init(args.namespace)
     rec = Recorder()
     warn_if_domain_busy(rec, env)
     procs = []

@@ -32,7 +32,7 @@ def optimize(args, env, out: Path, progress) -> int:
     print(f"kite_rto demo: GMA on the simulated kite, {args.iterations} iterations, lockstep, seed {args.seed}, "
           f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']} (node output in {out / 'nodes.log'}; Ctrl-C stops cleanly, "
           "--resume continues)", flush=True)
-    ros_init()
+    ros_init(args.namespace)
     rec = Recorder()
     warn_if_domain_busy(rec, env)
     log = open(out / "nodes.log", "a" if args.resume else "w")
