@@ -177,7 +177,7 @@ def test_short_fly_run_with_recording(ros_env, tmp_path):
             assert {mk.ns for mk in m.ros_msg.markers} >= {"kite", "tether", "h_min"}
             assert m.log_time_ns == m.ros_msg.markers[0].header.stamp.sec * 10**9 + \
                 m.ros_msg.markers[0].header.stamp.nanosec
-        elif topic in PER_SAMPLE:
+        elif topic.lstrip("/") in PER_SAMPLE:               # channels: the graph's names, /kite/state
             st = m.ros_msg.clock if topic == "/clock" else m.ros_msg.header.stamp
             stamps.setdefault(topic, []).append(st.sec * 10**9 + st.nanosec)
     assert min(log_times) == 0 and 42 * 10**9 - 20_000_000 <= max(log_times) <= 42 * 10**9

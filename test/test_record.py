@@ -101,7 +101,8 @@ def test_schemas_and_cdr_decode_back(tmp_path, from_files):
         rec.write(topic, serialize_message(sent[topic]), log_time=1_000 + i)
     rec.close()
     got = {m.channel.topic: m for m in read_ros2_messages(str(path))}
-    assert set(got) == set(TOPICS)
+    assert set(got) == {T.graph_name(t) for t in TOPICS}                # channels: the graph's names, /kite/state
+    got = {T.relative(topic): m for topic, m in got.items()}
     for topic, m in got.items():
         cls = TOPICS[topic][0]
         assert m.schema.name == type_name(cls) and m.schema.encoding == "ros2msg"
@@ -159,7 +160,7 @@ def test_record_command_on_a_live_graph_and_report(ros_env, tmp_path):
 
     counts, stamps, log_times, types = {}, {}, [], {}
     for m in read_ros2_messages(str(out)):
-        topic = m.channel.topic
+        topic = T.relative(m.channel.topic)
         counts[topic] = counts.get(topic, 0) + 1
         types[topic] = m.schema.name
         log_times.append(m.log_time_ns)
@@ -212,11 +213,11 @@ def test_record_command_on_a_live_graph_and_report(ros_env, tmp_path):
 def test_record_duration_ends_by_itself(ros_env, tmp_path):
     out = tmp_path / "idle.mcap"
     res = subprocess.run([PY, "-m", "kite_rto.tools.record", "--out", str(out), "--duration", "1.5",
-                          "--topics", T.LAPS, T.SETPOINTS], env=ros_env, capture_output=True, text=True, timeout=60)
+                          "--topics", "/kite/laps", "rto/setpoints"], env=ros_env, capture_output=True, text=True, timeout=60)
     assert res.returncode == 0, res.stderr
     with open(out, "rb") as f:
         summary = make_reader(f).get_summary()
-    assert sorted(ch.topic for ch in summary.channels.values()) == [T.LAPS, T.SETPOINTS]
+    assert sorted(ch.topic for ch in summary.channels.values()) == ["/kite/laps", "/rto/setpoints"]
     bad = subprocess.run([PY, "-m", "kite_rto.tools.record", "--out", str(out), "--topics", "/nope"], env=ros_env,
                          capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "/nope" in bad.stderr

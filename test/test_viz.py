@@ -108,7 +108,9 @@ def test_kite_foxglove_serves_scene_and_tension_to_a_protocol_client(ros_env):
             m = re.search(r"ws://127\.0\.0\.1:(\d+)", line)
         client = FoxgloveWsClient("127.0.0.1", int(m.group(1)), timeout=60.0)
         assert client.subprotocol in ("foxglove.sdk.v1", "foxglove.websocket.v1")
-        channels = client.wait_for_channels([T.MARKERS, T.TENSION, T.SETPOINTS, T.STATE], timeout=60.0)
+        channels = client.wait_for_channels([T.graph_name(t) for t in (T.MARKERS, T.TENSION, T.SETPOINTS, T.STATE)],
+                                            timeout=60.0)
+        channels = {T.relative(name): ch for name, ch in channels.items()}      # channels: /kite/markers, ...
         assert client.server_info["name"] == "kite_rto" and "time" in client.server_info["capabilities"]
         for topic in (T.MARKERS, T.TENSION):
             ch = channels[topic]
@@ -175,10 +177,12 @@ def test_foxglove_layout_names_real_topics_and_fields():
             "/kite/laps.position[4]"} <= set(paths)
     for value in paths:
         topic, field = value.split(".", 1)
+        topic = T.relative(topic)                           # the layout names topics as in a graph: /kite/...
         assert topic in TOPICS and _field_ok(TOPICS[topic][0], field), value
     assert LAP_FIELDS[2] == "mean_tension" and LAP_FIELDS[3] == "min_altitude" and \
         LAP_FIELDS[4] == "rms_cross_track_deg"
-    assert panels["3D!kite"]["topics"][T.MARKERS]["visible"] and panels["3D!kite"]["followTf"] == "anchor"
+    assert panels["3D!kite"]["topics"][T.graph_name(T.MARKERS)]["visible"]
+    assert panels["3D!kite"]["followTf"] == "anchor"
 
 
 def test_plotjuggler_layout_names_real_topics_and_fields():
@@ -189,11 +193,11 @@ def test_plotjuggler_layout_names_real_topics_and_fields():
     curves = [c for c in curves if "[[" not in c]
     assert "/kite/tension/wrench/force/x" in curves and "/rto/setpoints/A_phi/position" in curves
     for curve in curves:
-        topic = next((t for t in TOPICS if curve.startswith(t + "/")), None)
+        topic = next((T.graph_name(t) for t in TOPICS if curve.startswith(T.graph_name(t) + "/")), None)
         assert topic is not None, curve
         rest = curve[len(topic) + 1:]
         if topic in names:                                  # JointState: /topic/<name>/position
             name, field = rest.split("/")
             assert name in names[topic] and field == "position", curve
         else:
-            assert _field_ok(TOPICS[topic][0], rest.replace("/", ".")), curve
+            assert _field_ok(TOPICS[T.relative(topic)][0], rest.replace("/", ".")), curve

@@ -50,14 +50,15 @@ def node_name(name: str, namespace: str = "/") -> str:
     return f"{namespace.rstrip('/')}/{name.lstrip('/')}"
 
 
-def parse_source(name: str) -> str | None:
+def parse_source(name: str, namespace: str = "/") -> str | None:
     """The controller's ``setpoint_source`` parameter: None for ``*`` (any publisher), else the fully qualified node
-    name (``optimizer`` -> ``/optimizer``); raises :class:`ParameterError` for anything else."""
+    name; a relative name is in the controller's ``namespace`` (``optimizer`` -> ``/optimizer``, or
+    ``/kite2/optimizer`` for a controller in ``/kite2``). Raises :class:`ParameterError` for anything else."""
     if name == "*":
         return None
     if not re.fullmatch(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*", name):
         raise ParameterError(f"parameter setpoint_source = {name!r}: expected * or a node name such as /optimizer")
-    return "/" + name.lstrip("/")
+    return name if name.startswith("/") else node_name(name, namespace)
 
 
 def describe(publishers) -> str:

@@ -114,7 +114,7 @@ class ControllerNode(Node):
         self.pub_steering = self.create_publisher(JointState, STEERING, MEASUREMENTS)
         self.pub_path = self.create_publisher(Path, REFERENCE_PATH, LATCHED)
         self.pub_laps = self.create_publisher(JointState, LAPS, RELIABLE_10)
-        source = parse_source(v["setpoint_source"])
+        source = parse_source(v["setpoint_source"], self.get_namespace())
         try:
             self.loop = SteeringLoop(params, settings, c0, answer=self.answer, lap=self.publish_lap,
                                      path=self.publish_path, logger=self.get_logger(), sync=v["sync_optimizer"],

@@ -18,12 +18,13 @@ __all__ = ["publishers_of", "controller_inputs", "InputWatch", "GRAPH_PERIOD"]
 GRAPH_PERIOD = 0.5
 """Wall s between two looks at the graph (several publishers of an input are warned about within this)."""
 
-_TWO_PLANTS = ("more than one plant on this domain (or a killed one DDS still lists)? The controller keeps steering "
+_TWO_PLANTS = ("more than one plant in this graph (or a killed one DDS still lists)? The controller keeps steering "
                "the kite it flies")
 
 
 def publishers_of(node, topic: str) -> list[Publisher]:
-    """The publishers of ``topic`` in ``node``'s view of the graph."""
+    """The publishers of ``topic`` in ``node``'s view of the graph (a relative name is in the node's namespace: only
+    its own graph's publishers count)."""
     return [Publisher(node_name(i.node_name, i.node_namespace), bytes(i.endpoint_gid).hex())
             for i in node.get_publishers_info_by_topic(topic)]
 
@@ -51,7 +52,8 @@ class InputWatch:
     def __init__(self, node, loop, source: str | None, resubscribe):
         self.node, self.loop, self.resubscribe = node, loop, resubscribe
         self.watch = SourceWatch(node.get_logger())
-        self.inputs = controller_inputs(source, loop.sync)
+        self.inputs = {node.resolve_topic_name(topic): meaning        # in the node's namespace, /clock as remapped
+                       for topic, meaning in controller_inputs(source, loop.sync).items()}
         node.create_timer(GRAPH_PERIOD, self.check, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def check(self) -> None:

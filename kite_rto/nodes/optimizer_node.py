@@ -57,13 +57,9 @@ from .optimizer_params import PARAMS, cross_check, run_settings, settings_from_p
 from .parameters import declare_params
 from .spin import request_exit, run_node
 from .stop_signals import STOP
-from .topics import CRASHES, POSITION, SETPOINTS, STATE, STATUS, SYNC, SYNC_NAMES, TENSION, WIND, WIND_ESTIMATE
+from .topics import CRASHES, MANUAL_SETPOINTS, POSITION, SETPOINTS, STATE, STATUS, SYNC, SYNC_NAMES, TENSION, WIND, WIND_ESTIMATE
 
-__all__ = ["MANUAL_SETPOINTS", "OptimizerNode", "PARAMS", "STORAGE_EXIT", "STORE_FULL_ENV", "main"]
-
-MANUAL_SETPOINTS = "/rto/manual_setpoints"
-"""Operator setpoints (sensor_msgs/JointState like /rto/setpoints, rad), taken only while the node is inactive.
-(To move into topics.py with the other names.)"""
+__all__ = ["OptimizerNode", "PARAMS", "STORAGE_EXIT", "STORE_FULL_ENV", "main"]
 
 STORAGE_EXIT = 3
 """Exit code of an optimizer that could not write its database for ``storage_timeout`` s."""

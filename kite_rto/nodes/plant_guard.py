@@ -1,14 +1,16 @@
 """One plant per graph: the plant node's start-up check and its running watch for a second publisher.
 
-Two plants in one ROS domain publish two interleaved timelines on ``/kite/state`` and ``/clock``: the controller
-answers whichever sample arrives, each plant takes some of the answers, and what the kites fly depends on timing.
+Two plants in one graph (one ROS domain and namespace) publish two interleaved timelines on ``/kite/state`` and
+``/clock``: the controller answers whichever sample arrives, each plant takes some of the answers, and what the
+kites fly depends on timing.
 
 - **At start-up** (:func:`refuse_if_another_plant`, before the plant creates its publishers) the node waits up to
   :data:`DISCOVERY_WAIT` for the graph; if another node publishes ``/kite/state`` or ``/clock`` and a message from
   it arrives within :data:`ALIVE_WAIT`, the plant refuses to start (exit code 2) naming that node. A publisher
   that sends nothing in that time (a node that holds a publisher on the topic but does not fly a kite, a frozen
-  plant) is not a running plant: the plant names it and starts. (A killed plant is no obstacle: a participant
-  that is gone sends no discovery announcements, so a newly started one never lists it.)
+  plant) is not a running plant: the plant names it and starts. Topic names resolve in the plant's namespace, so
+  a plant of another graph (``-r __ns:=/kite2``) in the same domain is no obstacle. (A killed plant is no
+  obstacle either: a participant that is gone sends no discovery announcements, so a newly started one never lists it.)
 - **While running** (:class:`SecondPublisherWatch`, every :data:`WATCH_PERIOD` wall s) it warns, naming them, when
   the graph holds more publishers of ``/kite/state`` or ``/clock`` than its own (two plants started at the same
   moment, a probe or a replay publishing on its topics); the same set is warned about again every
@@ -85,8 +87,8 @@ def refuse_if_another_plant(node: Node) -> set:
         if got and msg is not None:
             raise AnotherPlant(f"another node already publishes {topic}: {names} (sent a message stamped "
                                f"{_stamp_s(msg):.2f} s); a second plant in the same ROS domain would interleave "
-                               "its samples with that one's: stop it, or start this plant with another "
-                               "ROS_DOMAIN_ID")
+                               "its samples with that one's: stop it, or start this plant in another namespace "
+                               "(--ros-args -r __ns:=/kite2) or ROS_DOMAIN_ID")
         node.get_logger().warning(f"{names} publishes {topic} but sent nothing in {ALIVE_WAIT:g} s: not a "
                                   "running plant (a frozen one?); starting")
         silent |= {bytes(i.endpoint_gid) for i in infos}

@@ -23,6 +23,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from ..kite.params import ParameterError
 from .dds_profile import use_shipped_profile
+from .namespace import with_graph_clock
 from .stop_signals import STOP, StopSignals
 
 __all__ = ["EXECUTOR_ENV", "DELAY_ENV", "run_node", "request_exit"]
@@ -136,6 +137,9 @@ def run_node(factory, args=None, *, events: bool = False) -> int:
 
     Before ``rclpy.init`` the shipped Fast DDS profile is put in force unless the user chose one
     (:mod:`kite_rto.nodes.dds_profile`); the node logs which profile it runs with (``DDS profile: ...``).
+    ``args`` (default ``sys.argv``) get the remap rule ``/clock:=clock`` appended
+    (:func:`~kite_rto.nodes.namespace.with_graph_clock`): in a namespace the node's time source follows its own graph's
+    clock.
     """
     if _wants_help(args if args is not None else sys.argv[1:]):
         print(_usage(factory), end="")
@@ -145,7 +149,9 @@ def run_node(factory, args=None, *, events: bool = False) -> int:
     if stop.signum is not None:                # stopped during the imports
         return 0
     profile, why = use_shipped_profile()
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    # the graph's own clock for use_sim_time in a namespace (kite_rto.nodes.namespace)
+    rclpy.init(args=with_graph_clock(sys.argv if args is None else args),
+               signal_handler_options=SignalHandlerOptions.NO)
     node = None
     code = 0
     try:

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from . import graph
 from .graph import GraphRun, NodeProcess, isolated_ros_env, stopped_by_signal
+from ..nodes.namespace import add_namespace_option
 from .progress import Progress, eta_text
 
 __all__ = ["parse_args", "fly", "report", "main"]
@@ -40,6 +41,7 @@ def parse_args(argv=None):
                     help="the plant's turbulence: field (3-D Mann box, the default) or uniform (one gust the "
                          "anemometer sees too); the optimizer normalizes by the matching wind source")
     ap.add_argument("--out", default="runs/demo", help="output folder (default runs/demo)")
+    add_namespace_option(ap)
     ap.add_argument("--mode", choices=("optimize", "fly"), default="optimize", help="default: optimize")
     ap.add_argument("--iterations", type=int, default=10, help="optimize: GMA iterations (default 10)")
     ap.add_argument("--resume", action="store_true", help="optimize: continue the run in --out/rto.sqlite")
@@ -62,7 +64,7 @@ def fly(args, env, out: Path, progress: Progress) -> dict:
     from .demo_graph import plant_params, recorder_summary, ros_init, spin_until, start_recorder, warn_if_domain_busy
     from .recorder import Recorder
 
-    ros_init()
+    ros_init(args.namespace)
     rec = Recorder()
     warn_if_domain_busy(rec, env)
     procs = []
@@ -71,11 +73,12 @@ def fly(args, env, out: Path, progress: Progress) -> dict:
     code = 1
     with GraphRun(procs, rec, log, progress) as run:
         extra = start_recorder(args, log, env, rec, procs)
-        ctrl = NodeProcess("controller", {}, log=log, env=env)
+        ctrl = NodeProcess("controller", {}, log=log, env=env, namespace=args.namespace)
         procs.append(ctrl)
         spin_until(lambda: rec.count_publishers(STEERING) > 0 or not ctrl.alive(), rec,
                    60.0 - (time.monotonic() - wall0), period=0.1)
-        plant = NodeProcess("plant", plant_params(args, 2 + extra, duration=args.duration), log=log, env=env)
+        plant = NodeProcess("plant", plant_params(args, 2 + extra, duration=args.duration), log=log, env=env,
+                            namespace=args.namespace)
         procs.append(plant)
         fly0 = None
         while plant.alive():

@@ -14,6 +14,7 @@ from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState
 from rclpy.signals import SignalHandlerOptions
 
+from ..nodes.namespace import tool_ros_args
 from ..nodes.topics import STATE
 from .graph import NodeProcess
 
@@ -23,9 +24,10 @@ __all__ = ["ros_init", "plant_params", "start_recorder", "recorder_summary", "sp
 GRAPH_NODES = ("plant", "controller", "optimizer", "echo_pilot")
 
 
-def ros_init() -> None:
-    """rclpy without its signal handlers: Ctrl-C raises KeyboardInterrupt here, and the demo stops the nodes."""
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+def ros_init(namespace: str | None = None) -> None:
+    """rclpy without its signal handlers: Ctrl-C raises KeyboardInterrupt here, and the demo stops the nodes. The
+    observer's node is in ``namespace`` (the demo's graph), with the graph's own clock."""
+    rclpy.init(args=tool_ros_args("kite_demo", [], namespace), signal_handler_options=SignalHandlerOptions.NO)
 
 
 def plant_params(args, wait_subscribers: int, **params) -> dict:
@@ -39,14 +41,17 @@ def plant_params(args, wait_subscribers: int, **params) -> dict:
 
 
 def warn_if_domain_busy(node, env: dict, discovery: float = 1.0) -> list:
-    """After ``discovery`` wall s, the kite_rto nodes already in this ROS domain (another graph, e.g. a test run,
-    would mix its samples and setpoints with the demo's); print one warning naming them. Returns their names."""
+    """After ``discovery`` wall s, the kite_rto nodes already in this graph: this ROS domain and ``node``'s namespace
+    (another graph there, e.g. a test run, would mix its samples and setpoints with the demo's; one in another
+    namespace does not); print one warning naming them. Returns their names."""
     spin_until(lambda: False, node, discovery)
-    busy = sorted({n for n, _ in node.get_node_names_and_namespaces() if n in GRAPH_NODES})
+    ns = node.get_namespace()
+    busy = sorted({n for n, n_ns in node.get_node_names_and_namespaces() if n in GRAPH_NODES and n_ns == ns})
     if busy:
-        print(f"kite_rto demo: WARNING: ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']} already has node(s) {', '.join(busy)}: "
-              "another graph shares this domain and will mix with this run; stop it, or set ROS_DOMAIN_ID to a "
-              "free domain", flush=True)
+        where = "" if ns == "/" else f" namespace {ns}"
+        print(f"kite_rto demo: WARNING: ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}{where} already has node(s) "
+              f"{', '.join(busy)}: another graph shares this domain and will mix with this run; stop it, or set "
+              "ROS_DOMAIN_ID to a free domain (or --namespace to another namespace)", flush=True)
     return busy
 
 
@@ -71,6 +76,12 @@ def _start_listener(name: str, cmd: list, log, env, rec, procs) -> None:
         raise RuntimeError(f"{name} exited (code {proc.proc.returncode}): " + " | ".join(proc.lines[-3:]))
 
 
+def _ns(args) -> list:
+    """``--namespace NS`` for a tool of the demo's graph (nothing in the root namespace)."""
+    ns = getattr(args, "namespace", None)
+    return [] if ns in (None, "/") else ["--namespace", ns]
+
+
 def start_recorder(args, log, env, rec, procs) -> int:
     """With ``--record``: start kite_record and kite_viz (the 3-D scene, so that the recording holds
     /kite/markers); with ``--viz`` alone: kite_viz. Wait until they listen; return the number of extra /kite/state
@@ -78,14 +89,14 @@ def start_recorder(args, log, env, rec, procs) -> int:
     extra = 0
     if args.record:
         Path(args.record).resolve().parent.mkdir(parents=True, exist_ok=True)
-        _start_listener("record", [sys.executable, "-m", "kite_rto.tools.record", "--out", str(args.record)],
-                        log, env, rec, procs)
+        _start_listener("record", [sys.executable, "-m", "kite_rto.tools.record", "--out", str(args.record),
+                                   *_ns(args)], log, env, rec, procs)
         extra += 1
     if args.record or getattr(args, "viz", False):
         # recording: one scene per 0.1 s of the flight, however fast the lockstep loop runs (no wall-rate cap);
         # live only: at most 20 per wall second, what a screen shows
         cap = ["--ros-args", "-p", "max_rate:=0.0"] if args.record else []
-        _start_listener("viz", [sys.executable, "-m", "kite_rto.tools.viz", *cap], log, env, rec, procs)
+        _start_listener("viz", [sys.executable, "-m", "kite_rto.tools.viz", *_ns(args), *cap], log, env, rec, procs)
         extra += 1
         print("  3-D scene on /kite/markers (kite_viz; RViz2 or Foxglove, fixed frame anchor)", flush=True)
     if args.record:
@@ -102,7 +113,7 @@ def recorder_summary(procs) -> None:
                   f"{p.proc.returncode})", flush=True)
 
 
-def lifecycle(node, label: str, timeout: float = 60.0, target: str = "/optimizer") -> None:
+def lifecycle(node, label: str, timeout: float = 60.0, target: str = "optimizer") -> None:
     """Ask ``target`` for the lifecycle transition ``label`` (``configure``, ``activate``, ...) through its standard
     ``change_state`` service, spinning ``node``; RuntimeError when it does not answer or refuses."""
     client = node.create_client(ChangeState, f"{target}/change_state")

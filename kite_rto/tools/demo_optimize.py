@@ -33,7 +33,7 @@ def optimize(args, env, out: Path, progress) -> int:
     print(f"kite_rto demo: GMA on the simulated kite, {args.iterations} iterations, lockstep, seed {args.seed}, "
           f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']} (node output in {out / 'nodes.log'}; Ctrl-C stops cleanly, "
           "--resume continues)", flush=True)
-    ros_init()
+    ros_init(args.namespace)
     rec = Recorder()
     warn_if_domain_busy(rec, env)
     log = open(out / "nodes.log", "a" if args.resume else "w")
@@ -45,7 +45,7 @@ def optimize(args, env, out: Path, progress) -> int:
         extra = start_recorder(args, log, env, rec, procs)
         opt = NodeProcess("optimizer", {"db": str(db), "n_iter": args.iterations, "exit_when_done": True,
                                         "wind_source": default_wind_source(args.wind_model), "autostart": False},
-                          log=log, env=env)
+                          log=log, env=env, namespace=args.namespace)
         procs.append(opt)
         print("  starting the optimizer (builds the model's NLPs, ~10-30 s) ...", flush=True)
         # A lifecycle node started unconfigured: the demo drives it, as `kite_ctl configure` / `activate` would
@@ -57,11 +57,13 @@ def optimize(args, env, out: Path, progress) -> int:
         if not opt.alive():
             raise RuntimeError(f"the optimizer exited with code {opt.proc.returncode}; see {out / 'nodes.log'}")
         # Synchronized with the optimizer: the graph flies the same sequence as the pure runner (run_rto).
-        ctrl = NodeProcess("controller", {"sync_optimizer": True}, log=log, env=env)
+        ctrl = NodeProcess("controller", {"sync_optimizer": True}, log=log, env=env,
+                            namespace=args.namespace)
         procs.append(ctrl)
         spin_until(lambda: any("new setpoints" in ln for ln in ctrl.lines) or not ctrl.alive(), rec, 120)
         plant = NodeProcess("plant", plant_params(args, 3 + extra),    # controller, optimizer, demo (+ recorder, viz)
-                            log=log, env=env)
+                            log=log, env=env,
+                            namespace=args.namespace)
         procs.append(plant)
         shown = 0
         fly0 = None

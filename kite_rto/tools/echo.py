@@ -1,6 +1,8 @@
 """Print the messages of a kite_rto topic, laid out like ``ros2 topic echo`` (for pip installs without ros2cli).
 
-``python -m kite_rto.tools.echo /kite/state [--once | --count N] [--timeout S]`` (console script ``kite_echo``).
+``python -m kite_rto.tools.echo /kite/state [--once | --count N] [--timeout S] [--namespace NS]`` (console script
+``kite_echo``). Topic names are the graph's (``/kite/state``); with ``--namespace /kite2`` (or ``--ros-args -r
+__ns:=/kite2``) they resolve in that graph (``/kite2/kite/state``).
 The message type and QoS come from the project's topic table (:data:`kite_rto.tools.record.TOPICS`), so no
 type argument is needed; ``--list`` prints the table. Messages are separated by ``---``; Ctrl-C ends quietly.
 Exit code 0, or 1 when ``--timeout`` passed without the requested messages, 2 for an unknown topic.
@@ -19,6 +21,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
 
+from ..nodes.namespace import add_namespace_option, tool_ros_args
+from ..nodes.topics import graph_name, relative
 from .record import TOPICS, subscriber_qos, topic_type, type_name
 
 __all__ = ["to_yaml", "run_cli", "main"]
@@ -117,13 +121,14 @@ def run_cli(make_node, argv, done, duration: float = 0.0, poll: float = 0.1) -> 
 def parse_args(argv):
     ap = argparse.ArgumentParser(prog="kite_echo", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("topic", nargs="?", help=f"one of: {', '.join(sorted(TOPICS))}")
+    ap.add_argument("topic", nargs="?", help=f"one of: {', '.join(graph_name(t) for t in sorted(TOPICS))}")
     ap.add_argument("--once", action="store_true", help="print one message and exit")
     ap.add_argument("--count", type=int, default=0, help="exit after N messages")
     ap.add_argument("--timeout", type=float, default=0.0,
                     help="give up (exit code 1) after S wall seconds without the requested messages")
     ap.add_argument("--list", action="store_true", help="list the kite_rto topics and their types")
     ap.add_argument("--use-sim-time", action="store_true", help="use /clock for the node's clock")
+    add_namespace_option(ap)
     return ap.parse_args(argv)
 
 
@@ -134,10 +139,11 @@ def main(argv=None) -> int:
         if not args.list:
             print("kite_echo: name a topic, one of:", file=sys.stderr)
         for topic, (cls, qos) in sorted(TOPICS.items()):
-            print(f"{topic:24s} {type_name(cls)}", file=sys.stdout if args.list else sys.stderr)
+            print(f"{graph_name(topic):24s} {type_name(cls)}", file=sys.stdout if args.list else sys.stderr)
         return 0 if args.list else 2
     try:
-        cls = topic_type(args.topic)
+        topic = relative(args.topic)
+        cls = topic_type(topic)
     except KeyError as exc:
         print(f"kite_echo: {exc.args[0]}", file=sys.stderr)
         return 2
@@ -155,7 +161,7 @@ def main(argv=None) -> int:
     def make_node():
         overrides = [Parameter("use_sim_time", value=True)] if args.use_sim_time else []
         node = Node("kite_echo", parameter_overrides=overrides)
-        node.create_subscription(cls, args.topic, callback, subscriber_qos(args.topic, 100))
+        node.create_subscription(cls, topic, callback, subscriber_qos(topic, 100))
         return node
 
     def done():
@@ -163,7 +169,7 @@ def main(argv=None) -> int:
             return True
         return bool(args.timeout) and time.monotonic() - t0 > args.timeout
 
-    code = run_cli(make_node, ["kite_echo", *argv], done)
+    code = run_cli(make_node, tool_ros_args("kite_echo", argv, args.namespace), done)
     if code == 0 and args.timeout and wanted and seen[0] < wanted:
         print(f"kite_echo: {seen[0]} of {wanted} messages on {args.topic} within {args.timeout:g} s",
               file=sys.stderr)

@@ -1,6 +1,7 @@
 """Serve the running graph to the Foxglove app over the Foxglove WebSocket protocol, without a ROS install.
 
-``python -m kite_rto.tools.foxglove_live [--host 127.0.0.1] [--port 8765] [--sample-period 0.05]`` (console script
+``python -m kite_rto.tools.foxglove_live [--host 127.0.0.1] [--port 8765] [--sample-period 0.05] [--namespace NS]``
+(console script
 ``kite_foxglove``), then in Foxglove: *Open connection* -> *Foxglove WebSocket* -> ``ws://127.0.0.1:8765``, and
 *Import layout* ``config/kite_rto.foxglove.json`` (3-D scene, tension, altitude, setpoints, cross-track error).
 
@@ -14,7 +15,8 @@ announces the simulated clock (Foxglove's *Time* capability), so the app's timel
 
 Per-sample topics (state, tension, position, wind, ...) are thinned to one message every ``--sample-period`` s of
 simulated time per topic (default 0.05 s, 20 Hz of flight: smooth plots; 0 = every sample); the others are all
-forwarded. The graph is only read: nothing is published on DDS. Ctrl-C stops it (exit code 0).
+forwarded. The graph is only read: nothing is published on DDS. Ctrl-C stops it (exit code 0). ``--namespace /kite2``
+serves the graph in that namespace, its channels named as in any graph (``/kite/state``), so the layout fits.
 """
 from __future__ import annotations
 
@@ -29,6 +31,7 @@ from rclpy.serialization import serialize_message
 from rclpy.utilities import remove_ros_args
 
 from ..nodes import topics as T
+from ..nodes.namespace import add_namespace_option, namespace_args
 from ..nodes.parameters import declare_params
 from ..nodes.spin import run_node
 from .markers import PointCache, marker_array
@@ -46,7 +49,7 @@ FORWARDED = tuple(t for t in sorted(TOPICS) if t != T.MARKERS)
 def ros2_channel(topic: str, cls, context=None) -> foxglove.Channel:
     """A Foxglove channel for ROS 2 messages of ``cls`` on ``topic`` (ros2msg schema, cdr encoding)."""
     schema = foxglove.Schema(name=type_name(cls), encoding="ros2msg", data=message_definition(cls).encode())
-    return foxglove.Channel(topic, schema=schema, message_encoding="cdr", context=context)
+    return foxglove.Channel(T.graph_name(topic), schema=schema, message_encoding="cdr", context=context)
 
 
 class FoxgloveBridge(Node):
@@ -106,7 +109,7 @@ class FoxgloveBridge(Node):
 
     def destroy_node(self):
         self.server.stop()
-        sent = ", ".join(f"{t} {n}" for t, n in self.forwarded.items() if n)
+        sent = ", ".join(f"{T.graph_name(t)} {n}" for t, n in self.forwarded.items() if n)
         print(f"[kite_foxglove] stopped; forwarded {sum(self.forwarded.values())} messages"
               + (f" ({sent})" if sent else ""), file=sys.stderr, flush=True)
         return super().destroy_node()
@@ -123,6 +126,7 @@ def parse_args(argv=None):
     ap.add_argument("--sample-period", type=float, default=0.05, metavar="S",
                     help="simulated seconds between two forwarded messages of a per-sample topic (default 0.05; "
                          "0 = every sample)")
+    add_namespace_option(ap)
     args = ap.parse_args(argv)
     if not 0 <= args.port <= 65535:
         ap.error(f"--port {args.port}: expected 0..65535")
@@ -134,7 +138,8 @@ def parse_args(argv=None):
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(remove_ros_args(["kite_foxglove", *argv])[1:])
-    return run_node(lambda: FoxgloveBridge(args), ["kite_foxglove", *argv], events=True)
+    return run_node(lambda: FoxgloveBridge(args), ["kite_foxglove", *argv, *namespace_args(args.namespace)],
+                    events=True)
 
 
 if __name__ == "__main__":

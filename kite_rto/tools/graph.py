@@ -38,9 +38,12 @@ def _die_with_parent():
     _PRCTL(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
 
 
-def node_command(name: str, params: dict | None = None) -> list[str]:
-    """The command line of ``ros2 run kite_rto <name> --ros-args -p k:=v ...`` for this interpreter."""
+def node_command(name: str, params: dict | None = None, namespace: str | None = None) -> list[str]:
+    """The command line of ``ros2 run kite_rto <name> --ros-args [-r __ns:=<namespace>] -p k:=v ...`` for this
+    interpreter."""
     cmd = [sys.executable, "-m", "kite_rto.nodes.entry", name, "--ros-args"]
+    if namespace not in (None, "/"):
+        cmd += ["-r", f"__ns:={namespace}"]
     for k, v in (params or {}).items():
         cmd += ["-p", f"{k}:={str(v).lower() if isinstance(v, bool) else v}"]
     return cmd
@@ -54,9 +57,11 @@ def start_process(cmd: list, env=None, die_with_parent: bool = False) -> subproc
                             preexec_fn=_die_with_parent if die_with_parent and _PRCTL is not None else None)
 
 
-def start_node(name: str, params: dict | None = None, env=None, die_with_parent: bool = False) -> subprocess.Popen:
-    """Start a node in its own process group, output (stdout + stderr) on a text pipe."""
-    return start_process(node_command(name, params), env, die_with_parent)
+def start_node(name: str, params: dict | None = None, env=None, die_with_parent: bool = False,
+               namespace: str | None = None) -> subprocess.Popen:
+    """Start a node (in ``namespace``, default the root) in its own process group, output (stdout + stderr) on a
+    text pipe."""
+    return start_process(node_command(name, params, namespace), env, die_with_parent)
 
 
 def stop_node(proc: subprocess.Popen, timeout: float = 10.0) -> str:
@@ -88,10 +93,11 @@ class NodeProcess:
     launcher dies without stopping it.
     """
 
-    def __init__(self, name: str, params: dict | None = None, log=None, env=None, cmd: list | None = None):
+    def __init__(self, name: str, params: dict | None = None, log=None, env=None, cmd: list | None = None,
+                 namespace: str | None = None):
         self.name = name
         self.lines: list[str] = []
-        self.proc = start_process(cmd or node_command(name, params), env, die_with_parent=True)
+        self.proc = start_process(cmd or node_command(name, params, namespace), env, die_with_parent=True)
         self._log = log
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()

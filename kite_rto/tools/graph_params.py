@@ -63,10 +63,12 @@ class GraphParameters:
         return f"{ns.rstrip('/')}/{name}"
 
     def look(self) -> None:
-        """One look at the graph: ask the new nodes, retry those whose services were not there yet."""
+        """One look at the graph: ask the new nodes of this node's namespace (its graph: another graph may share
+        the domain), retry those whose services were not there yet."""
+        own_ns = self.node.get_namespace()
         for name, ns in self.node.get_node_names_and_namespaces():
             full = self._full(ns, name)
-            if (full == self._own or name.startswith("_") or full in self.done or full in self._pending
+            if (ns != own_ns or full == self._own or name.startswith("_") or full in self.done or full in self._pending
                     or full in self.given_up):
                 continue
             self._pending[full] = [self.node.create_client(ListParameters, f"{full}/list_parameters"),

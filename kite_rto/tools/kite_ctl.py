@@ -1,7 +1,8 @@
 """``kite_ctl``: pause, resume and override the optimizer without a ROS install (what ``ros2 lifecycle`` does).
 
 Calls the optimizer's standard lifecycle services (``/optimizer/get_state``, ``/optimizer/change_state``) and
-publishes manual setpoints on ``/rto/manual_setpoints``::
+publishes manual setpoints on ``/rto/manual_setpoints``; ``--namespace /kite2`` (or ``--ros-args -r __ns:=/kite2``)
+talks to the optimizer of that graph (``/kite2/optimizer``)::
 
     kite_ctl state                          # unconfigured | inactive | active | finalized
     kite_ctl configure | activate | deactivate | cleanup | shutdown
@@ -31,8 +32,8 @@ from sensor_msgs.msg import JointState
 
 from ..flight.path import Setpoints
 from ..nodes.interface import RELIABLE_10
-from ..nodes.optimizer_node import MANUAL_SETPOINTS
-from ..nodes.topics import STATUS
+from ..nodes.namespace import add_namespace_option, tool_ros_args
+from ..nodes.topics import MANUAL_SETPOINTS, STATUS
 
 __all__ = ["ALIASES", "COMMANDS", "main"]
 
@@ -54,7 +55,9 @@ def parse_args(argv) -> argparse.Namespace:
                                        "services).")
     p.add_argument("command", choices=COMMANDS, help="what to do")
     p.add_argument("values", nargs="*", type=float, help="setpoint: theta_0 A_phi A_theta in deg")
-    p.add_argument("--node", default="/optimizer", help="the optimizer node's name (default /optimizer)")
+    p.add_argument("--node", default="optimizer", help="the optimizer node's name, relative to the namespace "
+                                                         "(default optimizer)")
+    add_namespace_option(p)
     p.add_argument("--timeout", type=float, default=10.0, help="wall s to wait for the optimizer (default 10)")
     args = p.parse_args(argv)
     if (args.command == "setpoint") != bool(args.values) or (args.values and len(args.values) != 3):
@@ -81,12 +84,13 @@ class Ctl:
 
     def call(self, srv_type, service: str, request):
         client = self.node.create_client(srv_type, f"{self.name}/{service}")
+        full = self.node.resolve_service_name(f"{self.name}/{service}")
         if not self.spin_until(client.service_is_ready):
-            raise CtlError(f"no optimizer answers {self.name}/{service} within {self.timeout:g} s (is it running, "
-                           "in this ROS_DOMAIN_ID? --node names another one)")
+            raise CtlError(f"no optimizer answers {full} within {self.timeout:g} s (is it running, in this "
+                           "ROS_DOMAIN_ID and namespace? --namespace / --node name another one)")
         future = client.call_async(request)
         if not self.spin_until(future.done):
-            raise CtlError(f"{self.name}/{service} did not answer within {self.timeout:g} s")
+            raise CtlError(f"{full} did not answer within {self.timeout:g} s")
         return future.result()
 
     def state(self) -> str:
@@ -127,7 +131,7 @@ class Ctl:
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(remove_ros_args(["kite_ctl", *argv])[1:])
-    rclpy.init(args=["kite_ctl", *argv])
+    rclpy.init(args=tool_ros_args("kite_ctl", argv, args.namespace))
     ctl = None
     try:
         ctl = Ctl(args.node, args.timeout)

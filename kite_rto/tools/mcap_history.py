@@ -39,8 +39,9 @@ def read_mcap(path) -> SimpleNamespace:
                            for cid, ch in summary.channels.items()} if summary.statistics else {}
         # file order = arrival order: the same sequence whether log times are simulated (a restarted plant starts
         # again at 0) or wall receive times
-        for _schema, channel, message in reader.iter_messages(topics=wanted, log_time_order=False):
-            topic = channel.topic
+        for _schema, channel, message in reader.iter_messages(topics=[T.graph_name(w) for w in wanted],
+                                                              log_time_order=False):
+            topic = T.relative(channel.topic)       # channels carry the graph's names, /kite/state
             if topic == T.STATE:
                 state = deserialize_message(message.data, JointState)
                 ns, pos = stamp_to_ns(state.header.stamp), state.position

@@ -1,6 +1,6 @@
 """Watch a running kite_rto graph: one line per lap, per RTO iteration and per phase or setpoint change.
 
-``python -m kite_rto.tools.monitor [--count N] [--duration S] [--use-sim-time]`` (console script
+``python -m kite_rto.tools.monitor [--count N] [--duration S] [--use-sim-time] [--namespace NS]`` (console script
 ``kite_monitor``; ``ros2 run kite_rto kite_monitor`` after colcon build). Subscribes ``/kite/laps``,
 ``/rto/status``, ``/rto/setpoints`` and ``/kite/crashes`` (it never subscribes the per-sample topics, so it costs
 the lockstep loop nothing). Lines look like::
@@ -25,6 +25,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
 
+from ..nodes.namespace import add_namespace_option, tool_ros_args
 from ..nodes.topics import CRASHES, LAPS, SETPOINTS, STATUS
 from .echo import run_cli
 from .record import TOPICS, subscriber_qos
@@ -161,6 +162,7 @@ def parse_args(argv):
     ap.add_argument("--duration", type=float, default=0.0,
                     help="exit after S seconds (wall; simulated with --use-sim-time)")
     ap.add_argument("--use-sim-time", action="store_true", help="the node's clock follows /clock")
+    add_namespace_option(ap)
     return ap.parse_args(argv)
 
 
@@ -195,7 +197,8 @@ def main(argv=None) -> int:
                                  subscriber_qos(CRASHES))
         return node
 
-    return run_cli(make_node, ["kite_monitor", *argv], lambda: bool(args.count) and printed[0] >= args.count,
+    return run_cli(make_node, tool_ros_args("kite_monitor", argv, args.namespace),
+                   lambda: bool(args.count) and printed[0] >= args.count,
                    duration=args.duration)
 
 

@@ -44,6 +44,7 @@ from std_msgs.msg import UInt32
 from visualization_msgs.msg import MarkerArray
 
 from ..nodes import topics as T
+from ..nodes.namespace import add_namespace_option, namespace_args
 from ..nodes.interface import LATCHED, MEASUREMENTS, RELIABLE_10
 from ..nodes.spin import request_exit, run_node
 from .graph_params import GraphParameters
@@ -66,6 +67,7 @@ TOPICS: dict = {
     T.SETPOINTS: (JointState, LATCHED),
     T.STATUS: (DiagnosticArray, RELIABLE_10),
     T.SYNC: (JointState, MEASUREMENTS),
+    T.MANUAL_SETPOINTS: (JointState, RELIABLE_10),
     T.MARKERS: (MarkerArray, RELIABLE_10),
 }
 """Every project topic -> (message class, QoS its publisher offers). A test checks it covers ``nodes.topics``."""
@@ -76,7 +78,8 @@ def topic_type(topic: str):
     try:
         return TOPICS[topic][0]
     except KeyError:
-        raise KeyError(f"{topic} is not a kite_rto topic; known: {', '.join(sorted(TOPICS))}") from None
+        raise KeyError(f"{topic} is not a kite_rto topic; known: "
+                       f"{', '.join(T.graph_name(t) for t in sorted(TOPICS))}") from None
 
 
 def subscriber_qos(topic: str, depth: int = 10) -> QoSProfile:
@@ -222,12 +225,14 @@ class McapRecording:
         self.closed = False
 
     def add_topic(self, topic: str, cls, qos: QoSProfile) -> int:
-        """Register the topic's channel (and its type's schema); return the channel id."""
+        """Register the topic's channel (and its type's schema); return the channel id. The channel is named by the
+        graph's name of the topic (``/kite/state`` for ``kite/state``, whatever the recorded graph's namespace)."""
         name = type_name(cls)
         if name not in self._schemas:
             text = message_definition(cls) if self._use_files else generated_definition(cls)
             self._schemas[name] = self._writer.register_schema(name=name, encoding="ros2msg", data=text.encode())
-        cid = self._writer.register_channel(topic=topic, message_encoding="cdr", schema_id=self._schemas[name],
+        cid = self._writer.register_channel(topic=T.graph_name(topic), message_encoding="cdr",
+                                            schema_id=self._schemas[name],
                                             metadata={"offered_qos_profiles": qos_yaml(qos)})
         self.channels[topic] = cid
         self.counts[topic] = 0
@@ -299,12 +304,13 @@ def _make_node(args):
             self.rec = RecordNode(self, self.recording, args.topics, log_time=args.log_time)
             self.recording.add_metadata("kite_record", {
                 "log_time": args.log_time, "publish_time": "wall receive time",
-                "topics": " ".join(args.topics), "started_wall": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-                "ros_domain_id": os.environ.get("ROS_DOMAIN_ID", "0"),
+                "topics": " ".join(map(T.graph_name, args.topics)),
+                "started_wall": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                "ros_domain_id": os.environ.get("ROS_DOMAIN_ID", "0"), "namespace": self.get_namespace(),
                 "duplicates": "re-published samples of " + " ".join(sorted(PER_SAMPLE)) + " skipped"})
             if not args.no_params:
                 self.params = GraphParameters(self, self.recording.add_metadata)
-            self.get_logger().info(f"recording {len(args.topics)} topics to {args.out}"
+            self.get_logger().info(f"recording {len(args.topics)} topics of {self.get_namespace()} to {args.out}"
                                    + (f" for {args.duration:g} s" if args.duration else " until Ctrl-C"))
             if args.duration:
                 self.create_timer(0.1, self._check, clock=RclClock(clock_type=ClockType.STEADY_TIME))
@@ -315,7 +321,7 @@ def _make_node(args):
 
         def destroy_node(self):
             self.recording.close()
-            counts = ", ".join(f"{t} {n}" for t, n in self.recording.counts.items() if n)
+            counts = ", ".join(f"{T.graph_name(t)} {n}" for t, n in self.recording.counts.items() if n)
             dup = sum(self.rec.clock.duplicates.values())
             nodes = len(self.params.done) if hasattr(self, "params") else 0
             print(f"[kite_record] wrote {self.recording.total} messages to {args.out}"
@@ -332,8 +338,8 @@ def parse_args(argv=None):
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True, help="MCAP file to write (e.g. run.mcap)")
     ap.add_argument("--duration", type=float, default=0.0, help="wall seconds to record (default: until Ctrl-C)")
-    ap.add_argument("--topics", nargs="+", default=sorted(TOPICS), metavar="TOPIC",
-                    help="topics to record (default: all kite_rto topics)")
+    ap.add_argument("--topics", nargs="+", default=[T.graph_name(t) for t in sorted(TOPICS)], metavar="TOPIC",
+                    help="topics to record, e.g. /kite/state (default: all kite_rto topics of the graph)")
     ap.add_argument("--log-time", choices=LOG_TIME_MODES, default="sim",
                     help="sim (default): log time = the message's simulated stamp (or the latest /clock); "
                          "wall: the wall receive time")
@@ -341,7 +347,10 @@ def parse_args(argv=None):
                     help="do not store the nodes' parameters as metadata records")
     ap.add_argument("--no-msg-files", action="store_true",
                     help="build the schemas from the message classes instead of the installed .msg files")
-    return ap.parse_args(argv)
+    add_namespace_option(ap)
+    args = ap.parse_args(argv)
+    args.topics = [T.relative(t) for t in args.topics]
+    return args
 
 
 def main(argv=None) -> int:
@@ -349,7 +358,8 @@ def main(argv=None) -> int:
     args = parse_args(remove_ros_args(["kite_record", *argv])[1:])
     unknown = [t for t in args.topics if t not in TOPICS]
     if unknown:
-        print(f"kite_record: not kite_rto topics: {', '.join(unknown)}; known: {', '.join(sorted(TOPICS))}",
+        print(f"kite_record: not kite_rto topics: {', '.join(map(T.graph_name, unknown))}; known: "
+              f"{', '.join(T.graph_name(t) for t in sorted(TOPICS))}",
               file=sys.stderr)
         return 2
     try:
@@ -360,7 +370,7 @@ def main(argv=None) -> int:
         return 1
     # Ctrl-C / SIGTERM: run_node's handlers (kite_rto.nodes.stop_signals) end the spin loop between two messages,
     # never in the middle of an MCAP write; the recording is then closed by destroy_node.
-    return run_node(lambda: _make_node(args), ["kite_record", *argv], events=True)
+    return run_node(lambda: _make_node(args), ["kite_record", *argv, *namespace_args(args.namespace)], events=True)
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ The control nodes are not touched: the geometry is :mod:`kite_rto.flight.scene` 
 """
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 
@@ -30,6 +31,7 @@ from visualization_msgs.msg import MarkerArray
 from ..flight.scene import ScenePacer, SceneStyle, SceneTracker, Trail
 from ..nodes import topics as T
 from ..nodes.interface import LATCHED, RELIABLE_10, stamp_to_ns
+from ..nodes.namespace import add_namespace_option, namespace_args
 from ..nodes.parameters import ParamSpec, declare_params
 from ..nodes.spin import run_node
 from .markers import PointCache, marker_array
@@ -111,10 +113,14 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     ours = argv[:argv.index("--ros-args")] if "--ros-args" in argv else argv
     if any(a in ("-h", "--help") for a in ours):
-        print(__doc__.strip() + "\n\nParameters (--ros-args -p NAME:=VALUE):\n"
+        print(__doc__.strip() + "\n\nOptions: --namespace NS (the graph's ROS namespace, e.g. /kite2; same as "
+              "--ros-args -r __ns:=NS)\n\nParameters (--ros-args -p NAME:=VALUE):\n"
               + "\n".join(f"  {s.name:<11} {s.default!s:<7} {s.doc}" for s in PARAMS))
         return 0
-    return run_node(VizNode, ["kite_viz", *argv], events=True)
+    ap = argparse.ArgumentParser(prog="kite_viz")
+    add_namespace_option(ap)
+    args, rest = ap.parse_known_args(ours)
+    return run_node(VizNode, ["kite_viz", *rest, *argv[len(ours):], *namespace_args(args.namespace)], events=True)
 
 
 if __name__ == "__main__":
