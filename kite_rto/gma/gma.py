@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import time
 from copy import deepcopy
+from types import SimpleNamespace
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -20,6 +21,7 @@ from .modifiers import Decision, ModelRealization, Modifiers
 from .problem import ModelProblem
 from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
 from .settings import GMASettings, per_setpoint
+from .safety import observed_curvature, safe_fraction
 from .structure import excluded_directions, structure_plan, structure_test
 
 __all__ = ["GMA"]
@@ -338,10 +340,17 @@ class GMA:
         step = np.clip(self._K * (prop.c_star - c_k), -self._max_step, self._max_step)
         c_next = np.clip(c_k + step, pr.c_lb, pr.c_ub)
         step = c_next - c_k
+        unscaled, alpha = step.copy(), 1.0
+        if prop.decision is Decision.STEP and pr.n_g and s.safe_curvature is not None:
+            alpha = self._safe_alpha(step, nominal, est, notes)
+            step = alpha * step
+            c_next = c_k + step
         radius_used = self._radius.copy()
         self._adapt_trust_region(step, prop.c_star - c_k, radius_abs)
+        if alpha < 1.0:     # the modified problem disagrees with the measured plant: trust it less
+            self._radius = np.maximum(self._radius * s.trust_shrink, s.trust_radius_min)
         decision, detail = prop.decision, prop.detail
-        if decision is Decision.STEP and bool(np.all(np.abs(step) <= s.tol_c * self._width)):
+        if decision is Decision.STEP and bool(np.all(np.abs(unscaled) <= s.tol_c * self._width)):
             decision, detail = Decision.CONVERGED, ""
         rec = IterationRecord(
             k=k, c_k=c_k, cost=nominal.cost, constraints=nominal.constraints, grad_cost=est.cost,
@@ -403,6 +412,35 @@ class GMA:
         else:
             notes.append(f"structure check: {len(hits)} direction(s) restored from the next iteration on")
         return est, [d.tolist() for _, d in hits]
+
+    def _safe_alpha(self, step: np.ndarray, nominal: PlantPoint, est: GradientEstimate, notes: list[str]
+                    ) -> float:
+        """The largest ``alpha`` in [0, 1] such that ``alpha * step`` keeps the predicted plant constraints within
+        ``safe_tolerance`` (:mod:`~kite_rto.gma.safety`); noted when it is below 1."""
+        s, n_g, w = self.settings, self.problem.n_g, self._width
+        if not np.all(np.isfinite(est.constraints)):
+            notes.append("safe step: no finite constraint gradient, step not taken")
+            return 0.0
+        g_std = np.zeros(n_g) if nominal.constraints_std is None else np.asarray(nominal.constraints_std, float)
+        slope_std = np.zeros(n_g)
+        if est.cost_std is not None and nominal.cost_std:   # same design: the cost's derivative std, rescaled
+            slope_std = float(np.abs(step) @ np.asarray(est.cost_std, float)) * g_std / nominal.cost_std
+        recs = self.history.iterations
+        results = {q.request_id: r for q, r in self.history.experiments}
+        stds = [getattr(results.get(r.experiment_ids[0] if r.experiment_ids else ""), "constraints_std", None)
+                for r in recs] + [nominal.constraints_std]
+        current = SimpleNamespace(c_k=self._c, c_next=self._c, constraints=nominal.constraints,
+                                  jac_constraints=est.constraints)
+        seen = observed_curvature(list(recs) + [current], stds, w, s.safe_sigma, s.safe_adapt_min_step, n_g)
+        M = np.maximum(per_setpoint("safe_curvature", s.safe_curvature, n_g), seen)
+        tol = per_setpoint("safe_tolerance", s.safe_tolerance, n_g)
+        alpha, j = safe_fraction(nominal.constraints, g_std, est.constraints.reshape(n_g, -1) @ step, slope_std,
+                                 M, float(np.sum((step / w) ** 2)), s.safe_sigma, tol)
+        if j is not None:
+            notes.append(f"safe step: scaled by {alpha:.3g} (g[{j}] = {nominal.constraints[j]:+.4g}, predicted "
+                         f"change {float(est.constraints.reshape(n_g, -1)[j] @ step):+.4g}, curvature bound "
+                         f"{M[j]:.4g}); trust region shrunk")
+        return alpha
 
     def _restored_column(self, dc: np.ndarray) -> np.ndarray:
         """The estimator column for a restored direction ``dc``: scaled so that its perturbation

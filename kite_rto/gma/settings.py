@@ -103,6 +103,17 @@ class GMASettings:
             (from ``cost_std``/``constraints_std`` of the measurements and the estimate's ``cost_std``) plus
             ``structure_rel_tol`` times the predicted change, ``>= 0``.
         structure_rel_tol: relative part of the threshold (covers the curvature over the step), ``>= 0``.
+        safe_curvature: safe steps (issue #14 item 3, :mod:`~kite_rto.gma.safety`): ``None`` = off (default, off
+            until the scenario campaign of #14 decides). Otherwise a prior bound ``M`` on the plant constraints'
+            curvature, constraint units per squared box width, ``>= 0``, scalar or one per constraint: the
+            filtered step is shortened so that every constraint, predicted from its measured value and gradient
+            with ``safe_sigma`` standard deviations and ``0.5 M |d/w|^2``, stays within ``safe_tolerance``.
+            ``M`` grows to the largest curvature the measured steps show.
+        safe_sigma: standard deviations of the measured constraint and of the predicted change, ``>= 0``.
+        safe_tolerance: how far the plant's constraints may be exceeded, constraint units, ``>= 0``; scalar or
+            one per constraint.
+        safe_adapt_min_step: steps shorter than this (largest component, box widths) do not update ``M``
+            (their gradient error over the step would look like curvature), ``>= 0``.
         max_ipopt_iter: IPOPT iteration limit per solve, ``>= 1``.
         ipopt_options: extra IPOPT options (without the ``ipopt.`` prefix), e.g. ``{"tol": 1e-9}``.
     """
@@ -129,6 +140,10 @@ class GMASettings:
     structure_step: float = 0.1
     structure_sigma: float = 3.0
     structure_rel_tol: float = 0.2
+    safe_curvature: Scalar | None = None
+    safe_sigma: float = 2.0
+    safe_tolerance: Scalar = 0.0
+    safe_adapt_min_step: float = 0.01
     max_ipopt_iter: int = 1000
     ipopt_options: dict = field(default_factory=dict)
 
@@ -162,6 +177,11 @@ class GMASettings:
         _check("structure_step", self.structure_step, 0.0, 1.0, low_open=True)
         _check("structure_sigma", self.structure_sigma, 0.0, None)
         _check("structure_rel_tol", self.structure_rel_tol, 0.0, None)
+        if self.safe_curvature is not None:
+            _check("safe_curvature", self.safe_curvature, 0.0, None)
+        _check("safe_sigma", self.safe_sigma, 0.0, None)
+        _check("safe_tolerance", self.safe_tolerance, 0.0, None)
+        _check("safe_adapt_min_step", self.safe_adapt_min_step, 0.0, None)
         if isinstance(self.max_ipopt_iter, bool) or not isinstance(self.max_ipopt_iter, int) \
                 or self.max_ipopt_iter < 1:
             raise ValueError(f"GMASettings.max_ipopt_iter={self.max_ipopt_iter!r}: expected an integer >= 1")
