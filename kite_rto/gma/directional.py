@@ -77,6 +77,7 @@ class DirectionalGradient(GradientEstimator):
         if not isinstance(reuse, bool):
             raise ValueError(f"DirectionalGradient.reuse={reuse!r}: expected True or False")
         self.reuse = reuse
+        self._radius_arg = radius
         if radius is None:
             reach = 2.0 * self.step * np.max(np.abs(U), axis=1)
             self.radius = np.where(reach > 0, reach, np.inf)
@@ -94,6 +95,15 @@ class DirectionalGradient(GradientEstimator):
     @property
     def n_directions(self) -> int:
         return self.U.shape[1]
+
+    def with_directions(self, extra) -> "DirectionalGradient":
+        """A copy with the columns of ``extra`` (n_c, m) appended to ``U`` (same step, reuse, window, rcond_min;
+        the default radius is re-derived from the new columns): how :class:`~kite_rto.gma.GMA` restores a
+        direction its structure check found the model wrong along (``GMASettings.structure_check_every``)."""
+        extra = np.asarray(extra, dtype=float).reshape(self.U.shape[0], -1)
+        window = None if self.window == 2 * self.n_directions else self.window
+        return DirectionalGradient(np.column_stack([self.U, extra]), self.step, self.reuse, self._radius_arg,
+                                   window, self.rcond_min)
 
     def coordinates(self, dc) -> np.ndarray:
         """Direction-basis coordinates ``z = U^+ dc`` of setpoint displacements ``dc`` (n_c,) or (m, n_c)."""

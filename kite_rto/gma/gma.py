@@ -9,16 +9,20 @@ from __future__ import annotations
 
 import time
 from copy import deepcopy
+from types import SimpleNamespace
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ._nlp import ModifiedNLP, NLPPair, RealizationNLP
+from .directional import DirectionalGradient
 from .gradients import FiniteDifferenceGradient, GradientEstimate, GradientEstimator, PlantPoint
 from .modifiers import Decision, ModelRealization, Modifiers
 from .problem import ModelProblem
 from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
 from .settings import GMASettings, per_setpoint
+from .safety import observed_curvature, safe_fraction
+from .structure import excluded_directions, structure_plan, structure_test
 
 __all__ = ["GMA"]
 
@@ -235,10 +239,30 @@ class GMA:
         """The requests of the open iteration at operating point ``c`` (nominal first), ids ``<tag>-<j>-...``."""
         pr, s, k = self.problem, self.settings, self._k
         past = self._points(exclude_iteration=k)
-        cs = [c.copy()] + [np.asarray(x, float) for x in self.gradient.plan(c, pr.c_lb, pr.c_ub, past)]
-        return [ExperimentRequest(f"{tag}-{j}-{'nominal' if j == 0 else 'perturbation'}", x,
-                                  "nominal" if j == 0 else "perturbation", k, s.settle_time, s.averaging)
-                for j, x in enumerate(cs)]
+        pert = [np.asarray(x, float) for x in self.gradient.plan(c, pr.c_lb, pr.c_ub, past)]
+        struct = (structure_plan(c, self._excluded(), s.structure_step, pr.c_lb, pr.c_ub)
+                  if self._structure_due() else [])
+        plan = [(c.copy(), "nominal")] + [(x, "perturbation") for x in pert] + [(x, "structure") for x in struct]
+        return [ExperimentRequest(f"{tag}-{j}-{purpose}", x, purpose, k, s.settle_time, s.averaging)
+                for j, (x, purpose) in enumerate(plan)]
+
+    def _excluded(self) -> np.ndarray:
+        """(n_c, m) the directions the gradient estimator leaves to the model (none unless directional)."""
+        if isinstance(self.gradient, DirectionalGradient):
+            return excluded_directions(self.gradient.U, self._width)
+        return np.zeros((self.problem.n_c, 0))
+
+    def _structure_due(self) -> bool:
+        """Whether the open iteration runs the structure check (``GMASettings.structure_check_every``,
+        ``structure_stall``): only when some direction is left to the model."""
+        s = self.settings
+        if not s.structure_check or self._excluded().shape[1] == 0:
+            return False
+        if s.structure_check_every > 0 and self._k % s.structure_check_every == 0:
+            return True
+        recs = self.history.iterations
+        return bool(s.structure_stall > 0 and recs
+                    and np.all(np.abs(recs[-1].step) <= s.structure_stall * self._width))
 
     def plan_at(self, c) -> list[ExperimentRequest]:
         """An operator's operating point: the requests the open iteration ``k`` would have at ``c`` (n_c,), inside
@@ -270,6 +294,9 @@ class GMA:
 
     def _resume(self) -> None:
         h, n_c, n_g = self.history, self.problem.n_c, self.problem.n_g
+        for rec in h.iterations:                     # directions the structure check restored, in order
+            if rec.restored_directions and isinstance(self.gradient, DirectionalGradient):
+                self.gradient = self.gradient.with_directions(np.asarray(rec.restored_directions, float).T)
         if h.iterations:
             last = h.iterations[-1]
             self._k, self._c = last.k + 1, last.c_next.copy()
@@ -300,20 +327,30 @@ class GMA:
         t0 = time.perf_counter()
         pr, s, k, c_k = self.problem, self.settings, self._k, self._c.copy()
         ordered = self._experiments_of(k)
-        nominal, *new = [_plant_point(q, r) for q, r in ordered]
+        nominal = _plant_point(*ordered[0])
+        new = [_plant_point(q, r) for q, r in ordered[1:] if q.purpose != "structure"]
+        struct = [_plant_point(q, r) for q, r in ordered[1:] if q.purpose == "structure"]
         model = self.linearize(c_k)
         est = self._estimate(c_k, nominal, new, model)
         notes = [est.notes] if est.notes else []
+        est, restored = self._check_structure(c_k, nominal, new, struct, model, est, notes)
         mods = self._modifiers(c_k, nominal, model, est, notes)
         radius_abs = self._radius * self._width
         prop = self._propose(mods, nominal, model, est, radius_abs, notes)
         step = np.clip(self._K * (prop.c_star - c_k), -self._max_step, self._max_step)
         c_next = np.clip(c_k + step, pr.c_lb, pr.c_ub)
         step = c_next - c_k
+        unscaled, alpha = step.copy(), 1.0
+        if prop.decision is Decision.STEP and pr.n_g and s.safe_curvature is not None:
+            alpha = self._safe_alpha(step, nominal, est, notes)
+            step = alpha * step
+            c_next = c_k + step
         radius_used = self._radius.copy()
         self._adapt_trust_region(step, prop.c_star - c_k, radius_abs)
+        if alpha < 1.0:     # the modified problem disagrees with the measured plant: trust it less
+            self._radius = np.maximum(self._radius * s.trust_shrink, s.trust_radius_min)
         decision, detail = prop.decision, prop.detail
-        if decision is Decision.STEP and bool(np.all(np.abs(step) <= s.tol_c * self._width)):
+        if decision is Decision.STEP and bool(np.all(np.abs(unscaled) <= s.tol_c * self._width)):
             decision, detail = Decision.CONVERGED, ""
         rec = IterationRecord(
             k=k, c_k=c_k, cost=nominal.cost, constraints=nominal.constraints, grad_cost=est.cost,
@@ -324,7 +361,7 @@ class GMA:
             modified_status=prop.status, c_star=prop.c_star, step=step, c_next=c_next, trust_radius=radius_used,
             trust_radius_next=self._radius.copy(), converged=decision is Decision.CONVERGED,
             decision=decision.describe(detail), notes=notes, solve_time=time.perf_counter() - t0,
-            experiment_ids=[q.request_id for q, _ in ordered])
+            experiment_ids=[q.request_id for q, _ in ordered], restored_directions=restored)
         self.history.iterations.append(rec)
         self._k, self._c = k + 1, c_next
         if decision.moved:
@@ -344,6 +381,73 @@ class GMA:
         if self.gradient.uses_model:
             return self.gradient.estimate(c_k, nominal, new, past, model=model)
         return self.gradient.estimate(c_k, nominal, new, past)
+
+    def _check_structure(self, c_k, nominal: PlantPoint, new: list[PlantPoint], struct: list[PlantPoint],
+                         model: ModelRealization, est: GradientEstimate, notes: list[str]):
+        """The measured structure check (:mod:`~kite_rto.gma.structure`): test each structure experiment against
+        the estimate; add the directions with a significant mismatch to the directional estimator and, when
+        this iteration's points span the enlarged set, re-estimate. Returns ``(estimate, restored directions)``."""
+        s = self.settings
+        if not struct:
+            return est, []
+        if not (np.all(np.isfinite(est.cost)) and np.all(np.isfinite(est.constraints))):
+            notes.append("structure check skipped: no usable gradient estimate")
+            return est, []
+        hits = []
+        for pt in struct:
+            test = structure_test(c_k, nominal, pt, est, s.structure_sigma, s.structure_rel_tol)
+            if not np.any(test.dc):
+                continue
+            notes.append(test.describe())
+            if test.significant and isinstance(self.gradient, DirectionalGradient):
+                hits.append((pt, self._restored_column(test.dc)))
+        if not hits:
+            return est, []
+        self.gradient = self.gradient.with_directions(np.column_stack([d for _, d in hits]))
+        again = self._estimate(c_k, nominal, new + [pt for pt, _ in hits], model)
+        if again.quality > 0 and np.all(np.isfinite(again.cost)):
+            notes.append(f"structure check: {len(hits)} direction(s) restored, gradient re-estimated "
+                         f"({again.method})")
+            est = again
+        else:
+            notes.append(f"structure check: {len(hits)} direction(s) restored from the next iteration on")
+        return est, [d.tolist() for _, d in hits]
+
+    def _safe_alpha(self, step: np.ndarray, nominal: PlantPoint, est: GradientEstimate, notes: list[str]
+                    ) -> float:
+        """The largest ``alpha`` in [0, 1] such that ``alpha * step`` keeps the predicted plant constraints within
+        ``safe_tolerance`` (:mod:`~kite_rto.gma.safety`); noted when it is below 1."""
+        s, n_g, w = self.settings, self.problem.n_g, self._width
+        if not np.all(np.isfinite(est.constraints)):
+            notes.append("safe step: no finite constraint gradient, step not taken")
+            return 0.0
+        g_std = np.zeros(n_g) if nominal.constraints_std is None else np.asarray(nominal.constraints_std, float)
+        slope_std = np.zeros(n_g)
+        if est.cost_std is not None and nominal.cost_std:   # same design: the cost's derivative std, rescaled
+            slope_std = float(np.abs(step) @ np.asarray(est.cost_std, float)) * g_std / nominal.cost_std
+        recs = self.history.iterations
+        results = {q.request_id: r for q, r in self.history.experiments}
+        stds = [getattr(results.get(r.experiment_ids[0] if r.experiment_ids else ""), "constraints_std", None)
+                for r in recs] + [nominal.constraints_std]
+        current = SimpleNamespace(c_k=self._c, c_next=self._c, constraints=nominal.constraints,
+                                  jac_constraints=est.constraints)
+        seen = observed_curvature(list(recs) + [current], stds, w, s.safe_sigma, s.safe_adapt_min_step, n_g)
+        M = np.maximum(per_setpoint("safe_curvature", s.safe_curvature, n_g), seen)
+        tol = per_setpoint("safe_tolerance", s.safe_tolerance, n_g)
+        alpha, j = safe_fraction(nominal.constraints, g_std, est.constraints.reshape(n_g, -1) @ step, slope_std,
+                                 M, float(np.sum((step / w) ** 2)), s.safe_sigma, tol)
+        if j is not None:
+            notes.append(f"safe step: scaled by {alpha:.3g} (g[{j}] = {nominal.constraints[j]:+.4g}, predicted "
+                         f"change {float(est.constraints.reshape(n_g, -1)[j] @ step):+.4g}, curvature bound "
+                         f"{M[j]:.4g}); trust region shrunk")
+        return alpha
+
+    def _restored_column(self, dc: np.ndarray) -> np.ndarray:
+        """The estimator column for a restored direction ``dc``: scaled so that its perturbation
+        (``step * column``) is as long, in box widths, as the existing directions' on average."""
+        U, w = self.gradient.U, self._width
+        size = float(np.mean(np.max(np.abs(U) / w[:, None], axis=0)))
+        return dc * size / float(np.max(np.abs(dc) / w))
 
     def _modifiers(self, c_k, nominal: PlantPoint, model: ModelRealization, est: GradientEstimate,
                    notes: list[str]) -> Modifiers:

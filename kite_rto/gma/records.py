@@ -131,7 +131,9 @@ class IterationRecord(_Serializable):
     ``u_star``, ``modified_cost``, ``modified_status``, ``c_star = y(u_star)``. Update: ``step`` (filtered,
     bounded), ``c_next``, relative trust radii ``trust_radius`` (used) and ``trust_radius_next``, ``converged``,
     ``decision`` (the text of a :class:`~kite_rto.gma.Decision`, read back with :attr:`outcome`), ``notes``,
-    wall-clock ``solve_time`` (s) and the ids of the experiments used.
+    wall-clock ``solve_time`` (s) and the ids of the experiments used. ``restored_directions``: directions
+    (setpoint units, one list of n_c per direction) that the structure check (``GMASettings.structure_check_every``)
+    added to the gradient estimator in this iteration; empty otherwise (and in records written before it existed).
     """
 
     k: int
@@ -165,6 +167,7 @@ class IterationRecord(_Serializable):
     notes: list[str]
     solve_time: float
     experiment_ids: list[str]
+    restored_directions: list = field(default_factory=list)
     _arrays = ("c_k", "constraints", "grad_cost", "jac_constraints", "g_hat", "grad_phi_hat", "jac_g_hat",
                "u_hat", "eps", "lam", "mu", "backoff", "u_star", "c_star", "step", "c_next", "trust_radius",
                "trust_radius_next")

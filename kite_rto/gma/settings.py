@@ -90,6 +90,30 @@ class GMASettings:
             through ``y(u)``.
         settle_time: hint copied into every :class:`ExperimentRequest` (generic units, e.g. s or laps), ``>= 0``.
         averaging: averaging-length hint copied into every request (generic units), ``> 0``.
+        structure_check_every: measured structure check (issue #14 item 2, ``docs/gma.md``): every this many
+            iterations (at ``k = 0, N, 2N, ...``) one extra experiment along each direction the gradient
+            estimator leaves to the model (for a :class:`~kite_rto.gma.DirectionalGradient`: the complement of
+            its directions, including setpoints held at a robustly active bound); a significant mismatch adds
+            the direction to the estimator. Integer ``>= 0``; 0 = off (default, off until the scenario campaign
+            of #14 decides).
+        structure_stall: also check in the iteration after a step whose every component was at most this
+            fraction of the box width (a stalled or converged iterate), ``>= 0``; 0 = off.
+        structure_step: length of a structure experiment, relative to the box width, in ``(0, 1]``.
+        structure_sigma: significance: a residual counts when it exceeds this many of its standard deviations
+            (from ``cost_std``/``constraints_std`` of the measurements and the estimate's ``cost_std``) plus
+            ``structure_rel_tol`` times the predicted change, ``>= 0``.
+        structure_rel_tol: relative part of the threshold (covers the curvature over the step), ``>= 0``.
+        safe_curvature: safe steps (issue #14 item 3, :mod:`~kite_rto.gma.safety`): ``None`` = off (default, off
+            until the scenario campaign of #14 decides). Otherwise a prior bound ``M`` on the plant constraints'
+            curvature, constraint units per squared box width, ``>= 0``, scalar or one per constraint: the
+            filtered step is shortened so that every constraint, predicted from its measured value and gradient
+            with ``safe_sigma`` standard deviations and ``0.5 M |d/w|^2``, stays within ``safe_tolerance``.
+            ``M`` grows to the largest curvature the measured steps show.
+        safe_sigma: standard deviations of the measured constraint and of the predicted change, ``>= 0``.
+        safe_tolerance: how far the plant's constraints may be exceeded, constraint units, ``>= 0``; scalar or
+            one per constraint.
+        safe_adapt_min_step: steps shorter than this (largest component, box widths) do not update ``M``
+            (their gradient error over the step would look like curvature), ``>= 0``.
         max_ipopt_iter: IPOPT iteration limit per solve, ``>= 1``.
         ipopt_options: extra IPOPT options (without the ``ipopt.`` prefix), e.g. ``{"tol": 1e-9}``.
     """
@@ -111,6 +135,15 @@ class GMASettings:
     model_point: str = "consistent"
     settle_time: float = 0.0
     averaging: float = 1.0
+    structure_check_every: int = 0
+    structure_stall: float = 0.0
+    structure_step: float = 0.1
+    structure_sigma: float = 3.0
+    structure_rel_tol: float = 0.2
+    safe_curvature: Scalar | None = None
+    safe_sigma: float = 2.0
+    safe_tolerance: Scalar = 0.0
+    safe_adapt_min_step: float = 0.01
     max_ipopt_iter: int = 1000
     ipopt_options: dict = field(default_factory=dict)
 
@@ -136,6 +169,19 @@ class GMASettings:
                              f"'realization'")
         _check("settle_time", self.settle_time, 0.0, None)
         _check("averaging", self.averaging, 0.0, None, low_open=True)
+        if isinstance(self.structure_check_every, bool) or not isinstance(self.structure_check_every, int) \
+                or self.structure_check_every < 0:
+            raise ValueError(f"GMASettings.structure_check_every={self.structure_check_every!r}: expected an "
+                             f"integer >= 0 (0 = off)")
+        _check("structure_stall", self.structure_stall, 0.0, None)
+        _check("structure_step", self.structure_step, 0.0, 1.0, low_open=True)
+        _check("structure_sigma", self.structure_sigma, 0.0, None)
+        _check("structure_rel_tol", self.structure_rel_tol, 0.0, None)
+        if self.safe_curvature is not None:
+            _check("safe_curvature", self.safe_curvature, 0.0, None)
+        _check("safe_sigma", self.safe_sigma, 0.0, None)
+        _check("safe_tolerance", self.safe_tolerance, 0.0, None)
+        _check("safe_adapt_min_step", self.safe_adapt_min_step, 0.0, None)
         if isinstance(self.max_ipopt_iter, bool) or not isinstance(self.max_ipopt_iter, int) \
                 or self.max_ipopt_iter < 1:
             raise ValueError(f"GMASettings.max_ipopt_iter={self.max_ipopt_iter!r}: expected an integer >= 1")
@@ -144,6 +190,11 @@ class GMASettings:
         if np.any(np.asarray(self.trust_radius, dtype=float) < self.trust_radius_min):
             raise ValueError(f"GMASettings.trust_radius_min={self.trust_radius_min!r}: expected "
                              f"<= trust_radius={self.trust_radius!r}")
+
+    @property
+    def structure_check(self) -> bool:
+        """True when the measured structure check is on (``structure_check_every`` or ``structure_stall``)."""
+        return self.structure_check_every > 0 or self.structure_stall > 0
 
     def to_dict(self) -> dict:
         """Plain-JSON form (sequences as lists, ``inf`` as the string ``"inf"``)."""

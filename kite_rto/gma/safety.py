@@ -1,0 +1,79 @@
+"""Safe steps (issue #14, item 3): no iterate may violate the plant's constraints beyond their tolerance.
+
+The modified problem predicts the constraints with the model's curvature plus an affine correction; when the
+plant's constraint curves differently, or the measured gradient is uncertain, its step can end outside the
+plant's feasible set. With ``GMASettings.safe_curvature`` set, :class:`~kite_rto.gma.GMA` shortens the filtered
+step ``d`` to ``alpha d``, ``alpha`` in [0, 1] the largest value with, for every constraint ``j``,
+
+    g_j + k s_j + alpha (J_j d + k t_j) + 0.5 M_j alpha^2 |d / w|^2  <=  max(tol_j, g_j + k s_j)
+
+where ``g_j`` is the measured constraint at ``c_k`` with standard deviation ``s_j``, ``J_j`` the estimated plant
+gradient, ``t_j`` the standard deviation of ``J_j d``, ``k = safe_sigma``, ``w`` the box width, ``tol_j =
+safe_tolerance`` and ``M_j`` a bound on the plant constraint's curvature in box widths (an SCFO-style
+sufficient condition, Bunin et al. 2014). From a point within ``k s_j`` of the limit, or beyond it, the step may
+not make the constraint worse. ``M_j`` starts at ``safe_curvature`` and grows to the largest curvature the
+measurements show: ``2 (e - k s) / |d / w|^2`` for each past step, ``e`` the measured constraint change minus
+its first-order prediction (:func:`observed_curvature`), so a model that disagrees with the plant earns shorter
+steps.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["safe_fraction", "observed_curvature"]
+
+
+def safe_fraction(g, g_std, slope, slope_std, curvature, step_sq: float, sigma: float, tolerance
+                  ) -> tuple[float, int | None]:
+    """The largest ``alpha`` in [0, 1] that satisfies the condition of the module docstring for all constraints.
+
+    Args:
+        g, g_std: measured constraints at ``c_k`` and their standard deviations (n_g,), constraint units.
+        slope, slope_std: ``J d`` and its standard deviation (n_g,), constraint units.
+        curvature: ``M`` (n_g,), constraint units per squared box width, ``>= 0``.
+        step_sq: ``|d / w|^2``, squared step in box widths.
+        sigma: ``k``.
+        tolerance: ``tol`` (n_g,), constraint units.
+
+    Returns ``(alpha, j)`` with ``j`` the limiting constraint (``None`` when the full step is safe).
+    """
+    alpha, limiting = 1.0, None
+    for j in range(np.size(g)):
+        start = g[j] + sigma * g_std[j]
+        room = max(tolerance[j], start) - start                          # >= 0
+        b = slope[j] + sigma * slope_std[j]
+        a = 0.5 * curvature[j] * step_sq
+        if a + b <= room:
+            continue
+        if a <= 0.0:
+            aj = room / b
+        else:
+            aj = (-b + math.sqrt(b * b + 4.0 * a * room)) / (2.0 * a)
+        aj = min(max(aj, 0.0), 1.0)
+        if aj < alpha:
+            alpha, limiting = aj, j
+    return alpha, limiting
+
+
+def observed_curvature(records, stds, width, sigma: float, min_step: float, n_g: int) -> np.ndarray:
+    """(n_g,) the largest constraint curvature (constraint units per squared box width) that consecutive
+    iteration records show: for a step ``d = c_{k+1} - c_k`` of at least ``min_step`` box widths (largest
+    component), ``2 (e - k s) / |d / w|^2`` with ``e = g(c_{k+1}) - g(c_k) - J_k d`` and ``s`` the standard
+    deviation of the two measurements (``stds``: one (n_g,) array or ``None`` per record); 0 when no step shows
+    any."""
+    out = np.zeros(n_g)
+    w = np.asarray(width, float)
+    for i in range(len(records) - 1):
+        prev, cur = records[i], records[i + 1]
+        d = np.asarray(cur.c_k, float) - np.asarray(prev.c_k, float)
+        if np.max(np.abs(d) / w) < min_step or not np.allclose(prev.c_next, cur.c_k):
+            continue
+        J = np.asarray(prev.jac_constraints, float).reshape(n_g, -1)
+        if not np.all(np.isfinite(J)):
+            continue
+        e = np.asarray(cur.constraints, float) - np.asarray(prev.constraints, float) - J @ d
+        s = np.hypot(*(np.zeros(n_g) if x is None else np.asarray(x, float) for x in (stds[i], stds[i + 1])))
+        out = np.maximum(out, 2.0 * (e - sigma * s) / float(np.sum((d / w) ** 2)))
+    return out

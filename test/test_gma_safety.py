@@ -1,0 +1,84 @@
+"""Safe steps (issue #14 item 3; kite_rto.gma.safety, GMASettings.safe_curvature).
+
+Closed-form problem, setpoints c in the box [0, 2]^2, start c0 = (0.5, 0.5) (feasible):
+
+    model  phi = |c - (2, 2)|^2,  g = c1 + c2 - 2.5 - 2 (c1 - 0.5)^2 <= 0   (thinks c1 relaxes the constraint)
+    plant  phi_p = |c - (2, 2)|^2,  g_p = c1 + c2 - 2.5 <= 0                 (it does not)
+
+Plant optimum (1.25, 1.25) with the constraint active. The modified problem corrects the model's constraint only
+to first order at c_k, so it keeps the model's curvature: its step ends beyond the plant's constraint. With the
+default settings (filter 0.5, trust radius 0.25) the iterates violate g_p by up to ~0.1 and wander. The safe step
+(plant curvature bound M = 0, exact here: g_p is linear) shortens those steps and shrinks the trust region: no
+iterate violates, and GMA still reaches the plant optimum.
+"""
+from types import SimpleNamespace
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from kite_rto.gma import GMA, GMASettings, ModelProblem, run_offline
+from kite_rto.gma.safety import observed_curvature, safe_fraction
+
+
+def model():
+    u = ca.SX.sym("u", 2)
+    return ModelProblem(u=u, cost=(u[0] - 2) ** 2 + (u[1] - 2) ** 2,
+                        constraints=u[0] + u[1] - 2.5 - 2.0 * (u[0] - 0.5) ** 2, outputs=u, lbu=[0, 0], ubu=[2, 2],
+                        u0=[0.5, 0.5], c_lb=[0, 0], c_ub=[2, 2], name="safe_model")
+
+
+def plant(c):
+    return (c[0] - 2) ** 2 + (c[1] - 2) ** 2, np.array([c[0] + c[1] - 2.5])
+
+
+def test_default_steps_violate_the_plant_constraint():
+    gma = GMA(model(), GMASettings(), c0=[0.5, 0.5])
+    run_offline(gma, plant, 30)
+    assert max(r.constraints[0] for r in gma.records) > 0.05
+
+
+def test_safe_steps_never_violate_and_reach_the_plant_optimum():
+    gma = GMA(model(), GMASettings(safe_curvature=0.0), c0=[0.5, 0.5])
+    run_offline(gma, plant, 30)
+    assert max(r.constraints[0] for r in gma.records) <= 1e-6
+    np.testing.assert_allclose(gma.c, [1.25, 1.25], atol=1e-3)
+    cut = [n for r in gma.records for n in r.notes if n.startswith("safe step: scaled by")]
+    assert cut and all(n.endswith("trust region shrunk") for n in cut)
+
+
+def test_safe_fraction_in_closed_form():
+    # g = -0.5, slope 1, no curvature: alpha = 0.5; with M = 2 and |d|^2 = 1: alpha^2 + alpha - 0.5 = 0
+    assert safe_fraction([-0.5], [0.0], [1.0], [0.0], [0.0], 1.0, 2.0, [0.0]) == (0.5, 0)
+    alpha, j = safe_fraction([-0.5], [0.0], [1.0], [0.0], [2.0], 1.0, 2.0, [0.0])
+    assert j == 0 and alpha == pytest.approx((-1 + 3 ** 0.5) / 2)
+    # sigmas: g + 2 * 0.1 and slope + 2 * 0.05; a tolerance of 0.1 gives room 0.4: alpha = 0.4 / 1.1
+    assert safe_fraction([-0.5], [0.1], [1.0], [0.05], [0.0], 1.0, 2.0, [0.1])[0] == pytest.approx(0.4 / 1.1)
+    # a step that decreases the constraint is free, also from an infeasible point; one that increases it is not
+    assert safe_fraction([0.3], [0.0], [-1.0], [0.0], [0.0], 1.0, 2.0, [0.0]) == (1.0, None)
+    assert safe_fraction([0.3], [0.0], [1.0], [0.0], [0.0], 1.0, 2.0, [0.0]) == (0.0, 0)
+
+
+def test_observed_curvature_from_consecutive_records():
+    # g = c^2 measured at c = 0 and 0.5 (box width 1), gradient 0 at 0: e = 0.25, curvature 2 * 0.25 / 0.25 = 2
+    recs = [SimpleNamespace(c_k=np.array([0.0]), c_next=np.array([0.5]), constraints=np.array([0.0]),
+                            jac_constraints=np.array([[0.0]])),
+            SimpleNamespace(c_k=np.array([0.5]), c_next=np.array([0.5]), constraints=np.array([0.25]),
+                            jac_constraints=np.array([[1.0]]))]
+    np.testing.assert_allclose(observed_curvature(recs, [None, None], [1.0], 2.0, 0.01, 1), [2.0])
+    # noise of 0.05 per measurement: e - 2 hypot(0.05, 0.05)
+    np.testing.assert_allclose(observed_curvature(recs, [np.array([0.05])] * 2, [1.0], 2.0, 0.01, 1),
+                               [2 * (0.25 - 2 * 0.05 * 2 ** 0.5) / 0.25])
+    assert observed_curvature(recs, [None, None], [1.0], 2.0, 0.6, 1).tolist() == [0.0]   # step too short
+
+
+@pytest.mark.parametrize("field, value, expected", [
+    ("safe_curvature", -1.0, r"safe_curvature=-1.0: expected every value in \[0.0, inf\]"),
+    ("safe_sigma", -1.0, r"safe_sigma=-1.0"),
+    ("safe_tolerance", [0.1, -0.1], r"safe_tolerance=\[0.1, -0.1\]"),
+    ("safe_adapt_min_step", float("inf"), r"safe_adapt_min_step=inf"),
+])
+def test_safe_settings_are_validated(field, value, expected):
+    with pytest.raises(ValueError, match=expected):
+        GMASettings(**{field: value})
+    assert GMASettings().safe_curvature is None            # off by default
