@@ -91,7 +91,8 @@ def _trial(rng, tmp, env) -> list:
             out = p.communicate()[0] or ""
             problems.append(f"{name} did not stop within 60 s")
         if p.returncode != 0:
-            problems.append(f"{name} exit {p.returncode}")
+            last = " | ".join(out.strip().splitlines()[-3:])
+            problems.append(f"{name} exit {p.returncode} (its last lines: {last})")
         bad = [line for line in out.splitlines() if any(b in line for b in BAD)]
         if bad:
             problems.append(f"{name}: {bad[0]!r}")
