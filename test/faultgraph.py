@@ -25,7 +25,7 @@ from kite_rto.kite.params import KiteParams
 from kite_rto.flight.path import SetpointBox, SetpointError, validate_setpoints
 from kite_rto.nodes.interface import LATCHED, RELIABLE_10, stamp_to_ns
 from kite_rto.tools.graph import node_command
-from rosutil import Probe
+from rosutil import DIE_WITH_PARENT, Probe
 
 QUIET = {"turbulence": False, "anemometer_noise": 0.0, "noise_angle_deg": 0.0, "noise_rate": 0.0,
          "noise_tension": 0.0}
@@ -42,7 +42,7 @@ class Proc:
         self.log_path = None if log_dir is None else os.path.join(str(log_dir), f"{label}.log")
         self._log = None if self.log_path is None else open(self.log_path, "a")
         self.proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                     start_new_session=True)
+                                     start_new_session=True, preexec_fn=DIE_WITH_PARENT)
         self.pid = self.proc.pid
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()

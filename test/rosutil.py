@@ -8,7 +8,19 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
 # The same launcher the demo uses: ``ros2 run kite_rto <name>``'s entry point in its own process.
-from kite_rto.tools.graph import start_node, stop_node as stop  # noqa: E402,F401
+from kite_rto.tools import graph as _graph
+from kite_rto.tools.graph import stop_node as stop  # noqa: E402,F401
+
+DIE_WITH_PARENT = _graph._die_with_parent if _graph._PRCTL is not None else None
+"""``preexec_fn`` for a test's subprocess: Linux sends it SIGTERM when the test process dies, even by SIGKILL, so
+an interrupted or killed test run leaves no node behind to disturb the next run in the same ROS domain (a lockstep
+plant whose controller is gone re-publishes its sample until stopped). Start from the main thread."""
+
+
+def start_node(name: str, params: dict | None = None, env=None, namespace: str | None = None):
+    """``kite_rto.tools.graph.start_node`` (``ros2 run kite_rto <name>``'s entry point in its own process group),
+    dying with the test process."""
+    return _graph.start_node(name, params, env, die_with_parent=True, namespace=namespace)
 
 
 class Probe:

@@ -19,6 +19,8 @@ from mcap_ros2.reader import read_ros2_messages
 
 from kite_rto.tools.record_time import PER_SAMPLE
 
+from rosutil import DIE_WITH_PARENT
+
 PY = sys.executable
 
 
@@ -86,7 +88,7 @@ class Output:
 
 def start_demo(args, env):
     return subprocess.Popen([PY, "-m", "kite_rto.tools.demo", *args], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=DIE_WITH_PARENT)
 
 
 def test_progress_line_of_the_optimization():

@@ -21,7 +21,7 @@ from mcap.reader import make_reader
 from kite_rto.gma import HistoryStore
 
 from faultlog import fault_row
-from rosutil import start_node
+from rosutil import DIE_WITH_PARENT, start_node
 
 pytestmark = [pytest.mark.ros, pytest.mark.faults]
 
@@ -33,7 +33,7 @@ def _start(name, tmp, env):
     if name == "recorder":
         return subprocess.Popen([sys.executable, "-m", "kite_rto.nodes.entry", "kite_record", "--out", str(tmp / "run.mcap")],
                                 env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                start_new_session=True)
+                                start_new_session=True, preexec_fn=DIE_WITH_PARENT)
     params = {"optimizer": {"db": str(tmp / "rto.sqlite"), "n_laps": 1, "settle_laps": 0},
               "controller": {"sync_optimizer": True},
               "plant": {"wait_subscribers": 2}}[name]

@@ -25,7 +25,7 @@ from kite_rto.nodes.interface import RELIABLE_10, ns_to_stamp
 from kite_rto.nodes.parameters import READ_ONLY, ParamSpec
 from kite_rto.tools.graph import node_command
 
-from rosutil import Probe, start_node, stop
+from rosutil import DIE_WITH_PARENT, Probe, start_node, stop
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "config" / "kite_rto.yaml"
@@ -302,7 +302,7 @@ def test_controller_parameters_over_dds_and_params_files(probe, ros_env, tmp_pat
     override.write_text("/controller:\n  ros__parameters:\n    k_psi: 2.5\n    blend_time: 5.0\n")
     cmd = node_command("controller") + ["--params-file", str(CONFIG), "--params-file", str(override)]
     proc = subprocess.Popen(cmd, env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=DIE_WITH_PARENT)
     try:
         assert get_params(probe, "controller", "k_psi", "blend_time", "dt", "box_A_phi_deg") == \
             [2.5, 5.0, 0.02, [42.0, 62.0]]

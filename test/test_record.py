@@ -24,7 +24,7 @@ from kite_rto.nodes.controller_node import LAP_FIELDS
 from kite_rto.tools.record import (TOPICS, McapRecording, generated_definition, message_definition, type_name)
 from kite_rto.tools.record_time import PER_SAMPLE, SimLogTime, cdr_stamp
 
-from rosutil import Probe, start_node, stop
+from rosutil import DIE_WITH_PARENT, Probe, start_node, stop
 
 PY = sys.executable
 
@@ -136,7 +136,7 @@ def test_record_command_on_a_live_graph_and_report(ros_env, tmp_path):
     out = tmp_path / "run.mcap"
     probe = Probe("record_probe")
     rec = subprocess.Popen([PY, "-m", "kite_rto.tools.record", "--out", str(out)], env=ros_env,
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=DIE_WITH_PARENT)
     ctrl = plant = None
     try:
         assert probe.spin_until(lambda: probe.node.count_subscribers(T.STATE) >= 1, 60.0), "recorder not up"

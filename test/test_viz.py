@@ -19,7 +19,7 @@ from kite_rto.nodes.controller_node import LAP_FIELDS
 from kite_rto.tools.markers import marker_array
 from kite_rto.tools.record import TOPICS
 
-from rosutil import Probe, start_node, stop
+from rosutil import DIE_WITH_PARENT, Probe, start_node, stop
 from ws_client import FoxgloveWsClient
 
 PY = sys.executable
@@ -48,7 +48,7 @@ def test_kite_viz_publishes_the_scene_on_simulated_time(ros_env):
     probe.node.create_subscription(MarkerArray, T.MARKERS, got.append, 100)
     viz = subprocess.Popen(
         [PY, "-m", "kite_rto.tools.viz", "--ros-args", "-p", "max_rate:=0.0"], env=ros_env,
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True, preexec_fn=DIE_WITH_PARENT)
     ctrl = plant = None
     out = ""
     try:
@@ -96,7 +96,7 @@ def test_kite_viz_refuses_a_bad_parameter_and_answers_help(ros_env):
 @pytest.mark.ros
 def test_kite_foxglove_serves_scene_and_tension_to_a_protocol_client(ros_env):
     server = subprocess.Popen([PY, "-m", "kite_rto.tools.foxglove_live", "--port", "0"], env=ros_env,
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True, preexec_fn=DIE_WITH_PARENT)
     client = ctrl = plant = None
     said, err = [], ""
     try:
