@@ -39,7 +39,7 @@ def one_start(env: dict, node) -> dict:
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
         out, future = {}, None
         try:
-            while time.monotonic() - t0 < 300 and not ("setpoints" in out and "status" in out):
+            while time.monotonic() - t0 < 300 and not {"setpoints", "status", "params"} <= set(out):
                 if "params" not in out:
                     if future is None and client.service_is_ready():
                         future = client.call_async(GetParameters.Request(names=["n_iter"]))
