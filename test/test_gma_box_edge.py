@@ -43,8 +43,19 @@ class ExactPlantGradient(GradientEstimator):
 def test_consistent_model_gradient_is_exact_on_the_box_edge(c, grad):
     model = GMA(edge_problem()).linearize(c)
     assert model.success
-    np.testing.assert_allclose(model.grad_phi, grad, atol=1e-7)
-    np.testing.assert_allclose(model.jac_g, [[1.0, 1.0]], atol=1e-7)
+    np.testing.assert_allclose(model.grad_phi, grad, atol=1e-9)
+    np.testing.assert_allclose(model.jac_g, [[1.0, 1.0]], atol=1e-9)
+
+
+def test_the_issue_reproduction_and_the_right_inverse_on_the_edge():
+    """The issue's lines verbatim (default name, default settings): [3, -1], not [1.5, -1]. At u = (2, 1) the
+    bound row of u1 equals the first row of dy: it is left out, and R is the identity (dy R = I exactly)."""
+    u = ca.SX.sym("u", 2)
+    P = ModelProblem(u=u, cost=(u[0] - .5) ** 2 + (u[1] - 1.5) ** 2, constraints=u[0] + u[1] - 10, outputs=u,
+                     lbu=[0, 0], ubu=[2, 2], u0=[.5, 1.5], c_lb=[0, 0], c_ub=[2, 2])
+    np.testing.assert_allclose(GMA(P).linearize([2., 1.]).grad_phi, [3.0, -1.0], atol=1e-9)
+    np.testing.assert_allclose(P.tangent_right_inverse([2.0, 1.0]), np.eye(2), atol=1e-12)
+    np.testing.assert_allclose(P.tangent_right_inverse([2.0, 2.0]), np.eye(2), atol=1e-12)   # a corner
 
 
 def test_right_inverse_still_holds_inputs_that_y_does_not_fix():
