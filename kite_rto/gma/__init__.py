@@ -6,9 +6,11 @@ The core knows nothing about kites and never imports ``rclpy``. See ``docs/gma.m
 """
 from .directional import DirectionalGradient, PrivilegedDirections, lagrangian_gradient, privileged_directions
 from .gma import GMA
+from .effort import NoiseTest, noise_test
 from .gradients import (FiniteDifferenceGradient, GradientEstimate, GradientEstimator, LeastSquaresGradient,
                         PlantPoint)
 from .modifiers import Decision, ModelRealization, Modifiers
+from .kkt import KKTTest, kkt_test
 from .offline import run_offline
 from .problem import ModelProblem
 from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
@@ -23,4 +25,4 @@ __all__ = ["HistoryStore", "StoreError",
            "DirectionalGradient", "PrivilegedDirections", "privileged_directions", "lagrangian_gradient",
            "ExperimentRequest", "ExperimentResult", "IterationRecord", "History", "run_offline",
            "BoundActivity", "robust_bounds", "model_optimum", "excluded_directions", "structure_plan",
-           "StructureTest", "structure_test"]
+           "StructureTest", "structure_test", "KKTTest", "kkt_test", "NoiseTest", "noise_test"]

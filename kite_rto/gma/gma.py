@@ -16,12 +16,14 @@ import numpy as np
 
 from ._nlp import ModifiedNLP, NLPPair, RealizationNLP
 from .directional import DirectionalGradient
+from .effort import NoiseTest, average, fold_repeats, noise_test, repeat_requests
 from .gradients import FiniteDifferenceGradient, GradientEstimate, GradientEstimator, PlantPoint
 from .modifiers import Decision, ModelRealization, Modifiers
 from .problem import ModelProblem
 from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
 from .settings import GMASettings, per_setpoint
 from .safety import observed_curvature, safe_fraction
+from .kkt import kkt_test
 from .structure import excluded_directions, structure_plan, structure_test
 
 __all__ = ["GMA"]
@@ -38,6 +40,7 @@ class _Proposal:
     cost: float
     status: str
     c_star: np.ndarray
+    nu: np.ndarray | None = None        # multipliers of the modified constraints (n_g,), >= 0; None when not solved
 
 
 _NOT_SOLVED = "not solved"
@@ -134,7 +137,9 @@ class GMA:
         return todo[0] if todo else None
 
     def submit(self, result: ExperimentResult) -> IterationRecord | None:
-        """Record a finished experiment. Returns the :class:`IterationRecord` if it completed the iteration.
+        """Record a finished experiment. Returns the :class:`IterationRecord` if it completed the iteration (not
+        when the iteration's last planned experiment leaves the gradient too noisy and GMA asks for repeats,
+        ``GMASettings.max_repeats_noise``).
 
         Raises ``ValueError`` for an unknown or already submitted ``request_id``, or a result of the wrong size.
         """
@@ -229,7 +234,9 @@ class GMA:
         return jac
 
     def _points(self, exclude_iteration: int | None = None) -> list[PlantPoint]:
-        return [_plant_point(q, r) for q, r in self.history.experiments if q.iteration != exclude_iteration]
+        """The finished experiments as plant points (repeats averaged with their original), in order."""
+        pairs = [(q, r) for q, r in self.history.experiments if q.iteration != exclude_iteration]
+        return [_averaged(q, rs) for q, rs in fold_repeats(pairs)]
 
     def _plan(self) -> None:
         """Plan the experiments of iteration ``k``: the nominal point, then the strategy's perturbations."""
@@ -260,7 +267,11 @@ class GMA:
             return False
         if s.structure_check_every > 0 and self._k % s.structure_check_every == 0:
             return True
-        recs = self.history.iterations
+        return self._stalled()
+
+    def _stalled(self) -> bool:
+        """The last completed iteration's step was at most ``structure_stall`` box widths in every setpoint."""
+        s, recs = self.settings, self.history.iterations
         return bool(s.structure_stall > 0 and recs
                     and np.all(np.abs(recs[-1].step) <= s.structure_stall * self._width))
 
@@ -321,22 +332,31 @@ class GMA:
         if not self.pending_requests():
             self._complete()
 
-    def _complete(self) -> IterationRecord:
-        """Close iteration ``k``: gradients, modifiers, the modified problem, the filtered step, the record."""
+    def _complete(self) -> IterationRecord | None:
+        """Close iteration ``k``: gradients, modifiers, the modified problem, the filtered step, the record.
+        ``None`` (nothing closed) when the gradient experiments must be flown again (:meth:`_ask_repeats`)."""
+        if self._ask_repeats():
+            return None
         self.prepare()          # before any CasADi call here: a worker thread may still be building the NLPs
         t0 = time.perf_counter()
         pr, s, k, c_k = self.problem, self.settings, self._k, self._c.copy()
         ordered = self._experiments_of(k)
-        nominal = _plant_point(*ordered[0])
-        new = [_plant_point(q, r) for q, r in ordered[1:] if q.purpose != "structure"]
-        struct = [_plant_point(q, r) for q, r in ordered[1:] if q.purpose == "structure"]
+        groups = fold_repeats(ordered)
+        nominal = _averaged(*groups[0])
+        new = [_averaged(q, rs) for q, rs in groups[1:] if q.purpose != "structure"]
+        struct = [_averaged(q, rs) for q, rs in groups[1:] if q.purpose == "structure"]
         model = self.linearize(c_k)
         est = self._estimate(c_k, nominal, new, model)
         notes = [est.notes] if est.notes else []
+        noise = self._noise_test(groups)
+        if noise is not None:
+            notes.append(noise.describe())
         est, restored = self._check_structure(c_k, nominal, new, struct, model, est, notes)
         mods = self._modifiers(c_k, nominal, model, est, notes)
         radius_abs = self._radius * self._width
         prop = self._propose(mods, nominal, model, est, radius_abs, notes)
+        if s.structure_kkt and struct and prop.nu is not None and self._stalled():
+            restored = restored + self._kkt_release(c_k, nominal, struct, prop.nu, restored, notes)
         step = np.clip(self._K * (prop.c_star - c_k), -self._max_step, self._max_step)
         c_next = np.clip(c_k + step, pr.c_lb, pr.c_ub)
         step = c_next - c_k
@@ -361,7 +381,9 @@ class GMA:
             modified_status=prop.status, c_star=prop.c_star, step=step, c_next=c_next, trust_radius=radius_used,
             trust_radius_next=self._radius.copy(), converged=decision is Decision.CONVERGED,
             decision=decision.describe(detail), notes=notes, solve_time=time.perf_counter() - t0,
-            experiment_ids=[q.request_id for q, _ in ordered], restored_directions=restored)
+            experiment_ids=[q.request_id for q, _ in ordered], restored_directions=restored,
+            gradient_experiments=sum(len(rs) for q, rs in groups if q.purpose in ("nominal", "perturbation")),
+            grad_cost_std=None if est.cost_std is None else np.asarray(est.cost_std, float).copy())
         self.history.iterations.append(rec)
         self._k, self._c = k + 1, c_next
         if decision.moved:
@@ -373,6 +395,55 @@ class GMA:
         """The finished ``(request, result)`` pairs of iteration ``k``, in planned order (nominal first)."""
         results = {q.request_id: (q, r) for q, r in self.history.experiments if q.iteration == k}
         return [results[q.request_id] for q in self.history.pending]
+
+    def _noise_test(self, groups) -> NoiseTest | None:
+        """The noise test of the open iteration's gradient experiments (:mod:`~kite_rto.gma.effort`), ``None``
+        when ``max_repeats_noise`` is 0 or there is nothing to test."""
+        s = self.settings
+        grad = [(q, rs) for q, rs in groups if q.purpose in ("nominal", "perturbation")]
+        if s.max_repeats_noise == 0 or not grad or grad[0][0].purpose != "nominal":
+            return None
+        pts = [_averaged(q, rs) for q, rs in grad]
+        return noise_test(pts[0], pts[1:], s.noise_ratio, len(grad[0][1]))
+
+    def _ask_repeats(self) -> bool:
+        """Effort matched to noise: while the open iteration's cost changes are noisy and its points have been
+        flown at most ``max_repeats_noise`` times again, add one more flight of the nominal and of every
+        perturbation to the plan. True when requests were added that are not finished yet (on a resume, the
+        repeats may already be in the history: the same decisions are taken again, without flying)."""
+        while True:
+            groups = fold_repeats(self._experiments_of(self._k))
+            test = self._noise_test(groups)
+            if test is None or not test.noisy or test.flights > self.settings.max_repeats_noise:
+                return False
+            grad = [(q, rs) for q, rs in groups if q.purpose in ("nominal", "perturbation")]
+            tag = self.history.pending[0].request_id.split("-")[0]
+            self.history.pending.extend(repeat_requests(grad, len(self.history.pending), tag))
+            if self.pending_requests():
+                return True
+
+    def _kkt_release(self, c_k, nominal: PlantPoint, struct: list[PlantPoint], nu: np.ndarray,
+                     restored: list, notes: list[str]) -> list:
+        """The measured-KKT test (:mod:`~kite_rto.gma.kkt`) on each structure experiment that leaves a bound at a
+        stalled iterate; a wrong multiplier sign adds the direction to the estimator from the next iteration on.
+        Directions the mismatch test restored in this iteration are not added again. Returns the added columns."""
+        if not isinstance(self.gradient, DirectionalGradient):
+            return []
+        pr, s = self.problem, self.settings
+        done = [np.asarray(d, float) for d in restored]
+        hits = []
+        for pt in struct:
+            test = kkt_test(c_k, nominal, pt, nu, pr.c_lb, pr.c_ub, s.structure_sigma)
+            if test is None:
+                continue
+            notes.append(test.describe())
+            if test.wrong_sign and not any(abs(_cosine(d, test.dc)) > 1 - 1e-9 for d in done):
+                hits.append(self._restored_column(test.dc))
+        if not hits:
+            return []
+        self.gradient = self.gradient.with_directions(np.column_stack(hits))
+        notes.append(f"measured KKT: {len(hits)} held direction(s) released, measured from the next iteration on")
+        return [d.tolist() for d in hits]
 
     def _estimate(self, c_k, nominal: PlantPoint, new: list[PlantPoint], model: ModelRealization
                   ) -> GradientEstimate:
@@ -492,7 +563,8 @@ class GMA:
         if pr.n_g and res.x.size > pr.n_u and np.any(res.x[pr.n_u:] > 1e-8):
             notes.append("soft constraints violated in the modified problem")
         detail = f"trust region active on c{np.flatnonzero(at_bound).tolist()}" if at_bound.any() else ""
-        return _Proposal(Decision.STEP, detail, mods, u_star, res.f, res.status, c_star)
+        return _Proposal(Decision.STEP, detail, mods, u_star, res.f, res.status, c_star,
+                         np.maximum(res.lam_g[: pr.n_g], 0.0))
 
     def _adapt_trust_region(self, step, proposed, radius_abs) -> None:
         """Per setpoint: shrink on a sign change of the step, grow when the bound was hit without one."""
@@ -508,3 +580,13 @@ class GMA:
 def _plant_point(request: ExperimentRequest, result: ExperimentResult) -> PlantPoint:
     """A finished experiment as the gradient estimators see it."""
     return PlantPoint(request.c, result.cost, result.constraints, result.cost_std, result.constraints_std)
+
+
+def _averaged(request: ExperimentRequest, results: list[ExperimentResult]) -> PlantPoint:
+    """An experiment and its repeats as one plant point (:func:`~kite_rto.gma.effort.average`)."""
+    return average([_plant_point(request, r) for r in results])
+
+
+def _cosine(a, b) -> float:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return float(a @ b / max(np.linalg.norm(a) * np.linalg.norm(b), 1e-300))

@@ -73,10 +73,14 @@ class ExperimentRequest(_Serializable):
     Attributes:
         request_id: unique id (``"k<iteration>-<index>-<purpose>"``); a submitted id is never requested again.
         c: setpoints to apply, shape (n_c,), plant setpoint units.
-        purpose: ``"nominal"`` (the operating point ``c_k``) or ``"perturbation"`` (gradient estimation).
+        purpose: ``"nominal"`` (the operating point ``c_k``), ``"perturbation"`` (gradient estimation),
+            ``"structure"`` (the structure check) or ``"repeat"`` (the same setpoints as ``repeat_of``, flown
+            again because the gradient was noisy, ``GMASettings.max_repeats_noise``).
         iteration: the GMA iteration ``k`` the experiment belongs to.
         settle_time: hint: how long to wait after applying ``c`` before measuring (generic units).
         averaging: hint: how long to average the measurements (generic units, e.g. laps).
+        repeat_of: for a repeat, the ``request_id`` of the experiment it repeats (its results are averaged);
+            ``""`` otherwise (and then not written by :meth:`to_dict`, so records without repeats are unchanged).
     """
 
     request_id: str
@@ -85,7 +89,14 @@ class ExperimentRequest(_Serializable):
     iteration: int
     settle_time: float = 0.0
     averaging: float = 1.0
+    repeat_of: str = ""
     _arrays = ("c",)
+
+    def to_dict(self) -> dict:
+        out = super().to_dict()
+        if not self.repeat_of:
+            del out["repeat_of"]
+        return out
 
 
 @dataclass
@@ -133,7 +144,12 @@ class IterationRecord(_Serializable):
     ``decision`` (the text of a :class:`~kite_rto.gma.Decision`, read back with :attr:`outcome`), ``notes``,
     wall-clock ``solve_time`` (s) and the ids of the experiments used. ``restored_directions``: directions
     (setpoint units, one list of n_c per direction) that the structure check (``GMASettings.structure_check_every``)
-    added to the gradient estimator in this iteration; empty otherwise (and in records written before it existed).
+    added to the gradient estimator in this iteration (by the mismatch test or by the measured-KKT test,
+    ``GMASettings.structure_kkt``; the notes say which); empty otherwise (and in records written before it existed).
+    ``gradient_experiments``: how many of this iteration's experiments the gradient estimate used (the nominal and
+    the perturbations, each as often as it was flown, ``GMASettings.max_repeats_noise``; past points an estimator
+    reuses are not counted; 0 in records written before it existed). ``grad_cost_std``: the estimate's standard
+    deviation of each entry of ``grad_cost`` (n_c,), ``None`` without measured standard deviations.
     """
 
     k: int
@@ -168,6 +184,9 @@ class IterationRecord(_Serializable):
     solve_time: float
     experiment_ids: list[str]
     restored_directions: list = field(default_factory=list)
+    gradient_experiments: int = 0
+    grad_cost_std: np.ndarray | None = None
+    _optional_arrays = ("grad_cost_std",)
     _arrays = ("c_k", "constraints", "grad_cost", "jac_constraints", "g_hat", "grad_phi_hat", "jac_g_hat",
                "u_hat", "eps", "lam", "mu", "backoff", "u_star", "c_star", "step", "c_next", "trust_radius",
                "trust_radius_next")

@@ -103,6 +103,12 @@ class GMASettings:
             (from ``cost_std``/``constraints_std`` of the measurements and the estimate's ``cost_std``) plus
             ``structure_rel_tol`` times the predicted change, ``>= 0``.
         structure_rel_tol: relative part of the threshold (covers the curvature over the step), ``>= 0``.
+        structure_kkt: measured-KKT test at held bounds (issue #14 item 2, ``docs/gma.md``): in an iteration the
+            stall trigger (``structure_stall``, required ``> 0``) checks, a structure experiment that moves a
+            setpoint off the bound it sits at measures the change of the plant's Lagrangian
+            ``phi_p + nu^T g_p`` (``nu``: the modified problem's multipliers); a decrease of more than
+            ``structure_sigma`` standard errors means the bound's multiplier has the wrong sign (the plant wants
+            to leave the bound): the direction is restored from the next iteration on. Off by default.
         safe_curvature: safe steps (issue #14 item 3, :mod:`~kite_rto.gma.safety`): ``None`` = off (default, off
             until the scenario campaign of #14 decides). Otherwise a prior bound ``M`` on the plant constraints'
             curvature, constraint units per squared box width, ``>= 0``, scalar or one per constraint: the
@@ -114,6 +120,12 @@ class GMASettings:
             one per constraint.
         safe_adapt_min_step: steps shorter than this (largest component, box widths) do not update ``M``
             (their gradient error over the step would look like curvature), ``>= 0``.
+        noise_ratio: effort matched to noise (issue #14 item 4, :mod:`~kite_rto.gma.effort`): the nominal and
+            perturbation experiments of an iteration are flown again while the standard error of some
+            perturbation's measured cost change exceeds this fraction of the change's size, ``> 0``.
+        max_repeats_noise: how many times at most each of them is flown again (their results are averaged,
+            the standard errors shrink as ``1 / sqrt(n)``); integer ``>= 0``, 0 = off (default). Needs the
+            results' ``cost_std``.
         max_ipopt_iter: IPOPT iteration limit per solve, ``>= 1``.
         ipopt_options: extra IPOPT options (without the ``ipopt.`` prefix), e.g. ``{"tol": 1e-9}``.
     """
@@ -140,10 +152,13 @@ class GMASettings:
     structure_step: float = 0.1
     structure_sigma: float = 3.0
     structure_rel_tol: float = 0.2
+    structure_kkt: bool = False
     safe_curvature: Scalar | None = None
     safe_sigma: float = 2.0
     safe_tolerance: Scalar = 0.0
     safe_adapt_min_step: float = 0.01
+    noise_ratio: float = 0.5
+    max_repeats_noise: int = 0
     max_ipopt_iter: int = 1000
     ipopt_options: dict = field(default_factory=dict)
 
@@ -177,11 +192,21 @@ class GMASettings:
         _check("structure_step", self.structure_step, 0.0, 1.0, low_open=True)
         _check("structure_sigma", self.structure_sigma, 0.0, None)
         _check("structure_rel_tol", self.structure_rel_tol, 0.0, None)
+        if not isinstance(self.structure_kkt, bool):
+            raise ValueError(f"GMASettings.structure_kkt={self.structure_kkt!r}: expected True or False")
+        if self.structure_kkt and not self.structure_stall > 0:
+            raise ValueError(f"GMASettings.structure_kkt=True with structure_stall={self.structure_stall!r}: "
+                             f"expected structure_stall > 0 (the test runs at a stalled iterate)")
         if self.safe_curvature is not None:
             _check("safe_curvature", self.safe_curvature, 0.0, None)
         _check("safe_sigma", self.safe_sigma, 0.0, None)
         _check("safe_tolerance", self.safe_tolerance, 0.0, None)
         _check("safe_adapt_min_step", self.safe_adapt_min_step, 0.0, None)
+        _check("noise_ratio", self.noise_ratio, 0.0, None, low_open=True)
+        if isinstance(self.max_repeats_noise, bool) or not isinstance(self.max_repeats_noise, int) \
+                or self.max_repeats_noise < 0:
+            raise ValueError(f"GMASettings.max_repeats_noise={self.max_repeats_noise!r}: expected an integer "
+                             f">= 0 (0 = off)")
         if isinstance(self.max_ipopt_iter, bool) or not isinstance(self.max_ipopt_iter, int) \
                 or self.max_ipopt_iter < 1:
             raise ValueError(f"GMASettings.max_ipopt_iter={self.max_ipopt_iter!r}: expected an integer >= 1")
