@@ -91,12 +91,14 @@ class Execution:
         submitted: keys submitted to Dask, in submission order (empty when everything was cached).
         cached: stored keys read from the cache.
         failed: key -> error text of tasks that failed after their retries (or whose dependency failed).
+        transient: key -> value of the unstored tasks that ran (not cached; e.g. for a log).
     """
 
     results: dict = field(default_factory=dict)
     submitted: list = field(default_factory=list)
     cached: list = field(default_factory=list)
     failed: dict = field(default_factory=dict)
+    transient: dict = field(default_factory=dict)
 
 
 def _check(tasks) -> dict:
@@ -150,7 +152,7 @@ def execute(tasks, cache: ResultCache, client=None, retries: int = 2, progress: 
         for fut in as_completed(list(futures.values())):
             t = owner[fut.key]
             bar.update(1)
-            if t.key in run.results or t.key in run.failed:
+            if t.key in run.results or t.key in run.failed or t.key in run.transient:
                 continue                          # a future is reported once; guard against a repeat anyway
             try:
                 value = fut.result()
@@ -159,4 +161,6 @@ def execute(tasks, cache: ResultCache, client=None, retries: int = 2, progress: 
                 continue
             if t.store:
                 run.results[t.key] = cache.put(t.key, value)
+            else:
+                run.transient[t.key] = value
     return run
