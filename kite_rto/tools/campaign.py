@@ -4,7 +4,8 @@ Runs on a ``LocalCluster`` (one process and one thread per worker, ``--workers``
 or, with ``--scheduler ADDRESS``, on a running Dask scheduler and its workers. Finished runs are cached, one JSON
 per run, in ``--cache-dir`` (default the ``campaign`` folder of the kite_rto cache) and never run again; only the
 missing ones start a cluster. Writes ``results.csv``, ``wall.csv``, ``summary.md`` and ``campaign.png`` to
-``--out`` and prints the summary. Exit code 0, 1 if a run failed, 2 on a bad argument. docs/campaign.md.
+``--out`` and prints the summary. Exit code 0, 1 if a run failed, 2 on a bad argument, 130 on Ctrl-C (finished
+runs stay cached). docs/campaign.md.
 """
 from __future__ import annotations
 
@@ -107,8 +108,14 @@ def main(argv=None) -> int:
     if to_run:
         where = args.scheduler or f"a LocalCluster of {args.workers} workers"
         print(f"kite_campaign: running on {where}", flush=True)
-        with _client(args.scheduler, args.workers) as client:
-            result = run_campaign(campaign, cache, client, retries=args.retries, progress=not args.no_progress)
+        try:
+            with _client(args.scheduler, args.workers) as client:
+                result = run_campaign(campaign, cache, client, retries=args.retries, progress=not args.no_progress)
+        except KeyboardInterrupt:
+            done = len(pending(campaign.tasks(), cache)[1])
+            print(f"kite_campaign: interrupted; {done} runs are in the cache, run the same command to continue",
+                  file=sys.stderr)
+            return 130
     else:
         result = run_campaign(campaign, cache, None, progress=False)
     out = Path(args.out)
