@@ -91,7 +91,7 @@ def _verdict(value: str, met) -> str:
 
 
 def _scenario_table(rows, variant: str) -> list:
-    lines = [f"| scenario | tuning | h_min m | runs | final % min | final % median | runs < 99 % | lowest alt m | "
+    lines = ["| scenario | tuning | h_min m | runs | final % min | final % median | runs < 99 % | lowest alt m | "
              "held from <= 3 | median t99 s |", "|---|---|---|---|---|---|---|---|---|---|"]
     for sc in dict.fromkeys(r.scenario for r in rows):
         rs = [r for r in rows if r.scenario == sc and r.method == variant]
