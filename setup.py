@@ -36,6 +36,7 @@ setup(
             "kite_demo = kite_rto.tools.demo:main",
             "kite_viz = kite_rto.nodes.entry:kite_viz",
             "kite_foxglove = kite_rto.nodes.entry:kite_foxglove",
+            "kite_campaign = kite_rto.tools.campaign:main",
         ],
     },
 )

@@ -46,3 +46,13 @@ def test_no_cache_writes_nothing(monkeypatch, tmp_path):
     monkeypatch.setattr(oracle, "plant_performance", _closed_form)
     find_oracle(grid=2, starts=1, maxfev=5, cache=False)
     assert not (tmp_path / "cache").exists()
+
+
+def test_a_damaged_entry_is_recomputed_and_replaced_whole(monkeypatch, tmp_path):
+    monkeypatch.setattr(oracle, "plant_performance", _closed_form)
+    res = find_oracle(grid=2, starts=1, maxfev=5, cache_dir=tmp_path)
+    path = tmp_path / f"oracle_{res.key}.json"
+    path.write_text('{"c": [0.1, ')                     # what a reader saw of a non-atomic write cut short
+    assert find_oracle(grid=2, starts=1, maxfev=5, cache_dir=tmp_path) == res
+    assert json.loads(path.read_text())["tension_kn"] == res.tension_kn
+    assert os.listdir(tmp_path) == [path.name]          # no temporary file left beside it

@@ -14,7 +14,7 @@ import numpy as np
 from ..rto.oracle import plant_performance
 from .scenarios import Scenario
 
-__all__ = ["Verdict", "judge"]
+__all__ = ["Verdict", "judge", "reaches"]
 
 
 @dataclass(frozen=True)
@@ -42,6 +42,14 @@ class Verdict:
     held_from: int | None
     lowest_altitude: float
     below_floor: int
+
+
+def reaches(scenario: Scenario, oracle_tension_kn: float, c, fraction: float = 0.99, h_tol: float = 2.0) -> bool:
+    """True if setpoints ``c`` (rad), flown on ``scenario``'s deterministic plant, give at least ``fraction`` of
+    ``oracle_tension_kn`` (kN) with a minimum altitude of at least ``h_min - h_tol`` (m): :func:`judge`'s test of
+    one iterate (the baselines' stop)."""
+    tension, z = plant_performance(scenario.plant, c)
+    return bool(tension >= fraction * oracle_tension_kn and z >= scenario.h_min - h_tol)
 
 
 def judge(scenario: Scenario, oracle_tension_kn: float, iterates, times, fraction: float = 0.99,

@@ -37,6 +37,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import tempfile
 from dataclasses import dataclass
 
 import numpy as np
@@ -157,10 +158,14 @@ class MannBox:
         if self.generated:
             os.makedirs(directory, exist_ok=True)
             raw = self._generate()
-            tmp = f"{self.path}.{os.getpid()}.tmp"
-            with open(tmp, "wb") as fh:
-                np.save(fh, raw)
-            os.replace(tmp, self.path)                 # atomic: a concurrent reader never sees half a file
+            fd, tmp = tempfile.mkstemp(dir=directory, prefix=".mann-", suffix=".tmp")   # unique per process and thread
+            try:
+                with os.fdopen(fd, "wb") as fh:
+                    np.save(fh, raw)
+                os.replace(tmp, self.path)             # atomic: a concurrent reader never sees half a file
+            except BaseException:
+                os.unlink(tmp)
+                raise
         self.raw = np.load(self.path, mmap_mode="r")
         mean, std = float(self.raw.mean(dtype=np.float64)), float(self.raw.std(dtype=np.float64))
         self.scale = self.sigma / std

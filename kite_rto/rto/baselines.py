@@ -4,6 +4,8 @@
 * :func:`finite_difference_ascent` — model-free: forward-difference gradient of the measured tension, projected
   gradient step in box-normalized shape coordinates, step length halved when the measured tension drops.
 * :func:`nelder_mead_plant` — SciPy Nelder–Mead directly on measured experiments (box-normalized, clipped).
+* :func:`bayes_opt_plant` — Bayesian optimization (the ``bayes_opt`` package: a Gaussian process with a learned
+  noise level, upper confidence bound) on measured experiments in box-normalized shape coordinates.
 
 Each returns a :class:`BaselineRun`: the candidate setpoints it would recommend after each experiment and the
 flight time at which it could; :func:`time_to_target` judges the candidates on the deterministic plant.
@@ -20,7 +22,8 @@ from .oracle import plant_performance
 from ..flight.shape import ShapeBox
 from ..kite.plant import PlantConfig
 
-__all__ = ["BaselineRun", "model_only", "finite_difference_ascent", "nelder_mead_plant", "time_to_target"]
+__all__ = ["BaselineRun", "model_only", "finite_difference_ascent", "nelder_mead_plant", "bayes_opt_plant",
+           "time_to_target"]
 
 
 class _Budget(Exception):
@@ -32,7 +35,8 @@ class BaselineRun:
     """Candidates (rad, (n, 3)) and the flight time (s) at which each became the recommendation.
 
     ``stop``: optional ``callable(c) -> bool`` judging each new candidate; once it returns True the run ends
-    early (``stopped``), e.g. when a candidate reaches the target on the deterministic plant.
+    early (``stopped``), e.g. when a candidate reaches the target on the deterministic plant. ``crashes``: plant
+    crashes during the run's flight.
     """
 
     name: str
@@ -40,6 +44,7 @@ class BaselineRun:
     times: list = field(default_factory=list)
     flight_time: float = 0.0
     experiments: int = 0
+    crashes: int = 0
     stop: object = None
     stopped: bool = False
 
@@ -60,6 +65,17 @@ def model_only(c0, budget: float) -> BaselineRun:
 
 def _flight(config, seed, spec, c0):
     return PlantFlight(config or PlantConfig(), seed, spec, c0=c0)
+
+
+def _finish(run: BaselineRun, fl: PlantFlight) -> BaselineRun:
+    run.flight_time, run.experiments = fl.t, len(fl.experiments)
+    run.crashes = 0 if fl.plant is None else fl.plant.crashes
+    return run
+
+
+def _merit(out, penalty: float) -> float:
+    """Measured cost plus ``penalty`` (kN/m) times the altitude violation (m): lower is better."""
+    return out.cost + penalty * max(0.0, out.constraint)
 
 
 def finite_difference_ascent(config: PlantConfig | None, seed: int, c0, budget: float,
@@ -95,8 +111,7 @@ def finite_difference_ascent(config: PlantConfig | None, seed: int, c0, budget: 
         if n > 0:
             x = np.clip(x + step * grad / n, 0.0, 1.0)
         run.add(box.from_unit(x), fl.t)
-    run.flight_time, run.experiments = fl.t, len(fl.experiments)
-    return run
+    return _finish(run, fl)
 
 
 def nelder_mead_plant(config: PlantConfig | None, seed: int, c0, budget: float,
@@ -130,8 +145,45 @@ def nelder_mead_plant(config: PlantConfig | None, seed: int, c0, budget: float,
                                                         "xatol": 1e-3, "fatol": 1e-3})
     except _Budget:
         pass
-    run.flight_time, run.experiments = fl.t, len(fl.experiments)
-    return run
+    return _finish(run, fl)
+
+
+def bayes_opt_plant(config: PlantConfig | None, seed: int, c0, budget: float,
+                    spec: ExperimentSpec | None = None, box: ShapeBox | None = None, init_points: int = 4,
+                    kappa: float = 2.576, penalty: float = 5.0, stop=None) -> BaselineRun:
+    """Bayesian optimization on measured experiments; the candidate is the best measured point so far.
+
+    The ``bayes_opt`` package's Gaussian process (Matern 5/2 plus a white-noise kernel whose level is fitted, so
+    the experiments' scatter is learned, not assumed) over box-normalized shape coordinates, with an upper
+    confidence bound (``kappa``) as acquisition. The measured merit is the experiment's cost plus ``penalty``
+    kN per metre of altitude violation (as in :func:`nelder_mead_plant`). It flies ``c0`` first, then
+    ``init_points`` uniform random points (seeded with ``seed``), then the acquisition's maximizers, until the
+    flight time reaches ``budget`` (s) or ``stop`` accepts a candidate.
+    """
+    from bayes_opt import BayesianOptimization, acquisition
+    from sklearn.gaussian_process.kernels import Matern, WhiteKernel
+    box = box or ShapeBox()
+    spec = spec or ExperimentSpec(n_laps=4)
+    names = ("theta_0", "A_phi", "aspect")
+    fl = _flight(config, seed, spec, c0)
+    run = BaselineRun("Bayes-opt", stop=stop)
+    run.add(c0, 0.0)
+    opt = BayesianOptimization(f=None, pbounds={n: (0.0, 1.0) for n in names}, random_state=seed, verbose=0,
+                               acquisition_function=acquisition.UpperConfidenceBound(kappa=kappa),
+                               allow_duplicate_points=True)
+    opt.set_gp_params(kernel=Matern(nu=2.5) + WhiteKernel(noise_level=0.1, noise_level_bounds=(1e-6, 1.0)))
+    queue = [np.clip(box.to_unit(c0), 0.0, 1.0)] + [np.array([p[n] for n in names])
+                                                   for p in opt.random_sample(init_points)]
+    best = math.inf
+    while fl.t < budget and not run.stopped:
+        x = queue.pop(0) if queue else np.array([opt.suggest()[n] for n in names])
+        x = np.clip(x, 0.0, 1.0)
+        val = _merit(fl.fly(box.from_unit(x)), penalty)
+        opt.register(params=dict(zip(names, x.tolist())), target=-val)
+        if val < best:
+            best = val
+            run.add(box.from_unit(x), fl.t)
+    return _finish(run, fl)
 
 
 def time_to_target(candidates, times, config: PlantConfig | None, target_kn: float, h_min: float = 100.0,

@@ -8,7 +8,8 @@ with a penalty on altitude violation) from the best grid points. Results are cac
 keyed by the plant configuration, the box and the evaluation settings, in the directory of
 :func:`oracle_cache_dir`: an explicit ``cache_dir``, else the environment variable ``KITE_RTO_CACHE``, else the
 platform's user cache directory (``platformdirs.user_cache_dir("kite_rto")``, e.g. ``~/.cache/kite_rto`` on
-Linux), never inside the installed package.
+Linux), never inside the installed package. Entries are written atomically (a temporary file renamed into place),
+so processes that share the cache (a campaign's workers) never read half a file; an unreadable entry is recomputed.
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import itertools
 import json
 import math
 import os
+import tempfile
 from dataclasses import dataclass, asdict
 
 import numpy as np
@@ -95,9 +97,12 @@ def find_oracle(config: PlantConfig | None = None, box: ShapeBox | None = None, 
     key = _key(config, box, h_min, spec, grid)
     cache_dir = oracle_cache_dir(cache_dir) if cache else None
     path = None if cache_dir is None else os.path.join(cache_dir, f"oracle_{key}.json")
-    if path and os.path.exists(path):
-        with open(path) as f:
-            return OracleResult(**json.load(f))
+    if path:
+        try:
+            with open(path) as f:
+                return OracleResult(**json.load(f))
+        except (OSError, ValueError, TypeError):
+            pass                                  # missing, unreadable or foreign entry: computed and written below
     evals = []
 
     def f(x):
@@ -119,7 +124,19 @@ def find_oracle(config: PlantConfig | None = None, box: ShapeBox | None = None, 
     res = OracleResult(c=c.tolist(), c_deg=np.degrees(c).tolist(), tension_kn=float(t), min_altitude=float(z),
                        evaluations=len(evals), key=key)
     if path:
-        os.makedirs(cache_dir, exist_ok=True)
-        with open(path, "w") as fh:
-            json.dump(asdict(res), fh, indent=1)
+        _write_atomic(path, asdict(res))
     return res
+
+
+def _write_atomic(path: str, value: dict) -> None:
+    """Write ``value`` as JSON to ``path`` through a temporary file in the same directory and :func:`os.replace`."""
+    directory = os.path.dirname(path)
+    os.makedirs(directory, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=directory, prefix=".oracle-", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(value, fh, indent=1)
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise

@@ -1,0 +1,162 @@
+"""The campaign's summary in markdown (:func:`summarize`): per scenario and GMA variant, then issue 14's done-when
+criteria over all runs and over the tuning and report subsets, then the baselines' time to 99 % over GMA's.
+
+Times to 99 % of runs that never reach it count as infinite in medians ("never" when the median is). A baseline's
+per-seed ratio is its time to 99 % over the reference GMA run's on the same seed (seeds where GMA did not reach
+are left out); when the baseline did not reach within its budget the ratio is only known to exceed the budget
+factor, and counts as infinite (shown as ``>budget``).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .methods import BASELINES, GMA
+
+__all__ = ["summarize", "CRITERIA"]
+
+MODEL_FREE = ("nelder-mead", "fd-ascent", "bayes-opt")
+CRITERIA = {
+    "final": "every run ends >= 99 % of its oracle",
+    "floor": "no iterate below h_min - 2 m",
+    "held": ">= 99 % held from iteration 3 on in >= 90 % of runs",
+    "t99": "median flight time to 99 % <= 600 s",
+    "baseline": "best model-free baseline needs >= 3x GMA's time to 99 % (median over scenarios)",
+}
+"""The done-when criteria of issue 14 that one campaign's table decides."""
+
+
+def _t(r) -> float:
+    return math.inf if r.t99_s is None else r.t99_s
+
+
+def _median(values) -> float:
+    return float(np.median(values)) if len(values) else math.nan
+
+
+def _fmt_t(v: float) -> str:
+    return "never" if v == math.inf else ("-" if math.isnan(v) else f"{v:.0f}")
+
+
+def _fmt_ratio(v: float, budget: float) -> str:
+    return f">{budget:g}" if v == math.inf else ("-" if math.isnan(v) else f"{v:.1f}")
+
+
+def _held3(r) -> bool:
+    return r.held_from is not None and r.held_from <= 3
+
+
+def _ratios(rows, method: str, ref: str) -> dict:
+    """scenario -> the per-seed ratios of ``method``'s time to 99 % over ``ref``'s."""
+    gma = {(r.scenario, r.seed): _t(r) for r in rows if r.method == ref}
+    out = {}
+    for r in rows:
+        tg = gma.get((r.scenario, r.seed), math.inf)
+        if r.method == method and math.isfinite(tg):
+            out.setdefault(r.scenario, []).append(_t(r) / tg if tg > 0 else (1.0 if _t(r) == 0 else math.inf))
+    return out
+
+
+def _best_baseline(rows) -> tuple:
+    """``(name, median over scenarios of the per-scenario median ratio)`` of the model-free baseline with the
+    smallest such median; ``(None, nan)`` without model-free baselines."""
+    best = (None, math.nan)
+    for m in MODEL_FREE:
+        per = [_median(v) for v in _ratios(rows, m, GMA).values()]
+        if per and (best[0] is None or _median(per) < best[1]):
+            best = (m, _median(per))
+    return best
+
+
+def _criteria(gma_rows, all_rows, budget: float) -> dict:
+    n = len(gma_rows)
+    final = sum(r.final_percent >= 99.0 for r in gma_rows)
+    floor = sum(r.below_floor > 0 for r in gma_rows)
+    held = sum(_held3(r) for r in gma_rows)
+    med = _median([_t(r) for r in gma_rows])
+    name, ratio = _best_baseline(all_rows)
+    return {
+        "final": (f"{final}/{n}", final == n),
+        "floor": (f"{floor}/{n} runs below", floor == 0),
+        "held": (f"{held}/{n} = {100 * held / n:.0f} %" if n else "-", n > 0 and held >= 0.9 * n),
+        "t99": (_fmt_t(med) + (" s" if math.isfinite(med) else ""), med <= 600.0),
+        "baseline": ((f"{name} {_fmt_ratio(ratio, budget)}", ratio >= 3.0) if name else
+                     ("no model-free baseline", None)),
+    }
+
+
+def _verdict(value: str, met) -> str:
+    return value if met is None else f"{value} ({'met' if met else 'NOT met'})"
+
+
+def _scenario_table(rows, variant: str) -> list:
+    lines = ["| scenario | tuning | h_min m | runs | final % min | final % median | runs < 99 % | lowest alt m | "
+             "held from <= 3 | median t99 s |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for sc in dict.fromkeys(r.scenario for r in rows):
+        rs = [r for r in rows if r.scenario == sc and r.method == variant]
+        if not rs:
+            continue
+        fin = [r.final_percent for r in rs]
+        alts = [r.lowest_altitude for r in rs]
+        low = "crash" if any(a is None for a in alts) else f"{min(alts):.1f}"
+        lines.append(f"| {sc} | {'yes' if rs[0].tuning else 'no'} | {rs[0].h_min:g} | {len(rs)} | {min(fin):.2f} | "
+                     f"{_median(fin):.2f} | {sum(f < 99.0 for f in fin)} | {low} | "
+                     f"{sum(_held3(r) for r in rs)}/{len(rs)} | {_fmt_t(_median([_t(r) for r in rs]))} |")
+    return lines
+
+
+def _baseline_table(rows, budget: float) -> list:
+    methods = [m for m in BASELINES if any(r.method == m for r in rows)]
+    if not methods:
+        return []
+    lines = ["| scenario | GMA median t99 s | " + " | ".join(f"{m}: median t99 s (ratio)" for m in methods) + " |",
+             "|---|---|" + "---|" * len(methods)]
+    ratios = {m: _ratios(rows, m, GMA) for m in methods}
+    for sc in dict.fromkeys(r.scenario for r in rows):
+        cells = []
+        for m in methods:
+            t = _median([_t(r) for r in rows if r.scenario == sc and r.method == m])
+            cells.append(f"{_fmt_t(t)} ({_fmt_ratio(_median(ratios[m].get(sc, [])), budget)})")
+        tg = _median([_t(r) for r in rows if r.scenario == sc and r.method == GMA])
+        lines.append(f"| {sc} | {_fmt_t(tg)} | " + " | ".join(cells) + " |")
+    overall = [_fmt_ratio(_median([_median(v) for v in ratios[m].values()]), budget) for m in methods]
+    lines.append("| median ratio over scenarios | | " + " | ".join(overall) + " |")
+    return lines
+
+
+def summarize(rows, budget: float) -> str:
+    """The markdown summary of ``rows`` (:class:`~kite_rto.campaign.results.RunResult`, campaign order);
+    ``budget``: the baselines' budget factor."""
+    variants = list(dict.fromkeys(r.method for r in rows if r.method not in BASELINES))
+    seeds = sorted({r.seed for r in rows})
+    out = [f"# Scenario campaign: {len(dict.fromkeys(r.scenario for r in rows))} scenarios x {len(seeds)} seeds, "
+           f"methods {', '.join(dict.fromkeys(r.method for r in rows))}", ""]
+    for v in variants:
+        out += [f"## {v}: per scenario", ""] + _scenario_table(rows, v) + [""]
+        subsets = {"all": lambda r: True, "tuning": lambda r: r.tuning, "report": lambda r: not r.tuning}
+        cols = {k: _criteria([r for r in rows if r.method == v and f(r)], [r for r in rows if f(r)], budget)
+                for k, f in subsets.items()}
+        out += [f"## {v}: done-when criteria (issue 14)", "", "| criterion | all | tuning | report |",
+                "|---|---|---|---|"]
+        for c, text in CRITERIA.items():
+            if c == "baseline" and v != GMA:
+                continue
+            out.append(f"| {text} | " + " | ".join(_verdict(*cols[k][c]) if any(r.method == v and subsets[k](r)
+                                                                                  for r in rows) else "-"
+                                                   for k in subsets) + " |")
+        out.append("")
+    base = _baseline_table(rows, budget)
+    if base:
+        out += [f"## Baselines: time to 99 % over GMA's (budget {budget:g}x GMA's)", ""] + base + [""]
+    extra = [v for v in variants if v != GMA]
+    if extra and any(r.scenario == "default" for r in rows):
+        g = _median([_t(r) for r in rows if r.scenario == "default" and r.method == GMA])
+        out += ["## GMA variants on the default plant: extra flight time to 99 % over gma's "
+                "(issue 14: the structure check costs <= 20 %)", ""]
+        for v in extra:
+            m = _median([_t(r) for r in rows if r.scenario == "default" and r.method == v])
+            rel = "-" if not (math.isfinite(m) and math.isfinite(g) and g > 0) else f"{100 * (m / g - 1):+.0f} %"
+            out.append(f"- {v}: median t99 {_fmt_t(m)} s vs {_fmt_t(g)} s: {rel}")
+        out.append("")
+    return "\n".join(out)
