@@ -45,8 +45,8 @@ PARAMS = (
               "only), or finite differences in every shape coordinate", choices=("directional", "forward",
                                                                                  "central", "least_squares")),
     ParamSpec("n_directions", _S.n_directions, "privileged directions measured per iteration (gradient "
-              "directional), at most the setpoints not held at a robustly active bound (2 on the default box, "
-              "where theta_0 is held)", 1, 3, unit="directions"),
+              "directional), at most the setpoints not held at a robustly active bound (3 on the default box: "
+              "none is held under the default prior)", 1, 3, unit="directions"),
     ParamSpec("fd_step", float(_S.fd_step[0]), "finite-difference step (directional: along each direction)",
               0.01, 1.0, unit="fraction of the shape box width"),
     ParamSpec("filter_gain", _S.gma.filter_gain, "GMA input filter K", 0.01, 1.0, unit="dimensionless"),

@@ -16,12 +16,12 @@ import numpy as np
 from ..gma import GMA, PrivilegedDirections
 from ..flight.shape import ShapeBox, setpoints_from_shape, shape_from_setpoints
 from ..kite.params import KiteParams
-from .directions import privileged_directions_for
+from .directions import bound_activity_for, privileged_directions_for
 from .ocp import KiteOCPSettings, model_problem
 from .settings import KiteRTOSettings
 from .startup_cache import cached, directions_from_json, directions_to_json
 
-__all__ = ["lap_problem", "ModelOptimum", "model_only_optimum", "gma_directions", "make_gma"]
+__all__ = ["lap_problem", "ModelOptimum", "model_only_optimum", "bound_activity", "gma_directions", "make_gma"]
 
 
 @lru_cache(maxsize=4)
@@ -79,9 +79,20 @@ def gma_directions(settings: KiteRTOSettings, model_params: KiteParams = KitePar
     model optimum in ``settings.box`` (cached on disk by :mod:`.startup_cache`; 10.6 s to compute in
     `benchmarks/bench_ocp.py`)."""
     _, _, _, x_opt, nu = _model_optimum_cached(settings.box, model_params, ocp)
-    key = (settings.box, x_opt, nu, model_params, ocp, settings.uncertainty, settings.n_directions)
+    held = bound_activity(settings, model_params, ocp)
+    key = (settings.box, x_opt, nu, model_params, ocp, settings.uncertainty, settings.n_directions, held)
     return cached("directions", key, lambda: privileged_directions_for(*key), to_json=directions_to_json,
                   from_json=directions_from_json)
+
+
+def bound_activity(settings: KiteRTOSettings, model_params: KiteParams = KiteParams(),
+                   ocp: KiteOCPSettings = KiteOCPSettings()) -> tuple:
+    """Per shape coordinate -1 / 0 / +1: the box bound the model's constrained optimum keeps under every
+    deviation of ``settings.uncertainty`` and the tightened altitude constraint (:func:`bound_activity_for`;
+    cached on disk, about a minute to compute)."""
+    _, _, _, x_opt, _ = _model_optimum_cached(settings.box, model_params, ocp)
+    key = (settings.box, x_opt, model_params, ocp, settings.uncertainty)
+    return tuple(cached("bound-activity", key, lambda: [int(v) for v in bound_activity_for(*key).at_bound]))
 
 
 def make_gma(settings: KiteRTOSettings | None = None, model_params: KiteParams | None = None,

@@ -19,38 +19,56 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..gma import GMASettings, PrivilegedDirections, lagrangian_gradient, privileged_directions
+from ..gma import (BoundActivity, GMASettings, PrivilegedDirections, lagrangian_gradient, model_optimum,
+                   privileged_directions, robust_bounds)
 from .ocp import KiteOCPSettings, model_problem
 from ..kite.params import KiteParams, ParameterError
 from ..flight.shape import ShapeBox
 
-__all__ = ["ModelUncertainty", "privileged_directions_for"]
+__all__ = ["ModelUncertainty", "bound_activity_for", "privileged_directions_for"]
 
 
 @dataclass(frozen=True)
 class ModelUncertainty:
-    """Plausible deviations of the model parameters from their nominal values (a prior, not the plant's values).
+    """Plausible deviations of the model parameters from their nominal values: a prior from the literature, not
+    the plant's values (docs/gma.md *The prior*).
+
+    Each deviation is the far end of the range the literature reports around the nominal model, on the side a
+    real kite usually lies; it is wider than, and not equal to, the default plant's own offset (E -0.4, g_s
+    -0.005, shear +0.05, c_E +2), which GMA must not know.
 
     Attributes:
-        E: glide ratio, dimensionless (a real kite is often less efficient than its nominal polar).
-        g_s: turning constant, rad/m.
-        shear: wind-shear exponent, dimensionless.
-        c_E: glide loss when steering, dimensionless (one-sided: the nominal model has none).
+        E: glide ratio, dimensionless: -1.0 (Erhard & Strauch: "typically 4-5" for the model's 5).
+        g_s: turning constant, rad/m: -0.01 (Erhard & Strauch, table II: 0.03-0.05 rad/m around the model's 0.04).
+        shear: wind-shear exponent, dimensionless: +0.10 (0.1-0.25 over land; Costello et al. 2017 use 0.15, the
+            IEC 61400-1 normal wind profile 0.2, rough terrain more).
+        c_E: glide loss when steering, dimensionless: +3.0 (one-sided: the nominal model has none; the do-mpc kite
+            example's loss E_0 - 0.028 u^2 is several units of E at large steering inputs, and 3 keeps the glide
+            ratio positive at full steering for E >= 4).
+        altitude_error: how much higher than the plant the model may put the lap's minimum altitude, m (> 0):
+            25 m. The c_E prior alone takes the model's best realization of its own optimum from 21.8 m above
+            h_min onto the constraint, so the constraint's pull must be considered when deciding which bounds
+            are robustly active (:func:`bound_activity_for`).
     """
 
-    E: float = -0.5
-    g_s: float = -0.005
-    shear: float = 0.05
-    c_E: float = 1.0
+    E: float = -1.0
+    g_s: float = -0.01
+    shear: float = 0.10
+    c_E: float = 3.0
+    altitude_error: float = 25.0
 
     def __post_init__(self):
         for f in fields(self):
             v = getattr(self, f.name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v == 0:
                 raise ParameterError(f"ModelUncertainty.{f.name} = {v!r}: expected a finite nonzero deviation")
+        if self.altitude_error < 0:
+            raise ParameterError(f"ModelUncertainty.altitude_error = {self.altitude_error!r}: expected a "
+                                 "positive altitude error, m")
 
     def names(self) -> list[str]:
-        return [f.name for f in fields(self)]
+        """The uncertain model parameters (:class:`KiteParams` fields), in order."""
+        return [f.name for f in fields(self) if f.name != "altitude_error"]
 
     def values(self) -> list[float]:
         return [float(getattr(self, n)) for n in self.names()]
@@ -62,12 +80,37 @@ def _at_bound(x, lb, ub, tol: float = 1e-6) -> np.ndarray:
 
 
 @lru_cache(maxsize=8)
+def bound_activity_for(box: ShapeBox, x0: tuple, model_params: KiteParams = KiteParams(),
+                       ocp: KiteOCPSettings = KiteOCPSettings(),
+                       uncertainty: ModelUncertainty = ModelUncertainty()) -> BoundActivity:
+    """Which bounds of ``box`` the model's **constrained** optimum keeps for every deviation of ``uncertainty``
+    and with the altitude constraint tightened by ``uncertainty.altitude_error``
+    (:func:`~kite_rto.gma.robust_bounds`); one optimum NLP per case (6 on the kite, about 10 s each)."""
+    names = uncertainty.names()
+    x0 = np.asarray(x0, dtype=float)
+
+    def optimum(theta, offsets):
+        params = replace(model_params, **dict(zip(names, (float(t) for t in theta))))
+        problem = model_problem(params, ocp, c_lb=box.lower(), c_ub=box.upper(), c_guess=x0,
+                                name="kite_activity", shape=True)
+        return model_optimum(problem, offsets)
+
+    theta0 = [float(getattr(model_params, n)) for n in names]
+    return robust_bounds(optimum, theta0, uncertainty.values(), box.lower(), box.upper(),
+                         constraint_offsets=(uncertainty.altitude_error / ocp.constraint_unit,), tol=1e-3)
+
+
+@lru_cache(maxsize=8)
 def privileged_directions_for(box: ShapeBox, x0: tuple, nu: tuple, model_params: KiteParams = KiteParams(),
                                ocp: KiteOCPSettings = KiteOCPSettings(),
                                uncertainty: ModelUncertainty = ModelUncertainty(),
-                               n_directions: int = 2) -> PrivilegedDirections:
+                               n_directions: int = 2, at_bound: tuple | None = None) -> PrivilegedDirections:
     """DMA's privileged directions (shape coordinates) at the model optimum ``x0`` with constraint multipliers
-    ``nu`` (tuples, for the cache); one realization NLP per uncertain parameter and one nominal, about 2 s each."""
+    ``nu`` (tuples, for the cache); one realization NLP per uncertain parameter and one nominal, about 2 s each.
+
+    ``at_bound`` (-1 / 0 / +1 per coordinate): the bounds that may be held, e.g.
+    :attr:`BoundActivity.at_bound` of :func:`bound_activity_for`; default: every bound ``x0`` sits on (the
+    gradient-only test of :func:`~kite_rto.gma.privileged_directions` then decides alone)."""
     x0 = np.asarray(x0, dtype=float)
     nu = np.asarray(nu, dtype=float)
     settings, names = GMASettings(), uncertainty.names()
@@ -81,4 +124,5 @@ def privileged_directions_for(box: ShapeBox, x0: tuple, nu: tuple, model_params:
     theta0 = [float(getattr(model_params, n)) for n in names]
     return privileged_directions(gradient, theta0, uncertainty.values(), n_directions,
                                  scale=box.upper() - box.lower(),
-                                 at_bound=_at_bound(x0, box.lower(), box.upper()))
+                                 at_bound=_at_bound(x0, box.lower(), box.upper()) if at_bound is None
+                                 else np.asarray(at_bound))
