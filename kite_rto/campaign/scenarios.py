@@ -1,7 +1,7 @@
 """Plant variants for scenario campaigns (:class:`Scenario`, :data:`SCENARIOS`).
 
 Each scenario is a "real kite" the model does not know, varied over the ranges the literature reports (the
-defaults and ranges are in docs/science.md): glide ratio E 4-5 (Erhard & Strauch; do-mpc draws 5-8), turning
+defaults and ranges are in docs/theory.md): glide ratio E 4-5 (Erhard & Strauch; do-mpc draws 5-8), turning
 constant g_s 0.03-0.05 rad/m (Erhard & Strauch, table II), reference wind 7-9 m/s and shear exponent 0.1-0.25
 (Costello et al. 2017; IEC 61400-1's normal wind profile uses 0.2), steering dead time 0.15-0.4 s (0.25-0.27 s
 identified on the TU Delft V3 kite), IEC turbulence class A-C and Mann length scale 20-60 m, h_min 80-120 m
