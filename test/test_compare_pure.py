@@ -15,7 +15,7 @@ def test_pure_database_compares_identical_and_a_changed_cost_is_found(tmp_path, 
     store.save_history(res.history)
     store.close()
     assert main(["--db", str(db), "--seed", "2"]) == 0
-    assert "bit for bit: 3 experiments" in capsys.readouterr().out
+    assert "bit for bit: 4 experiments" in capsys.readouterr().out     # one iteration: nominal + 3 directions
     other = HistoryStore(str(db)).load()
     other.experiments[1][1].cost = float(np.nextafter(other.experiments[1][1].cost, 0.0))   # one ulp
     diff = compare_histories(other, res.history)

@@ -96,7 +96,7 @@ def test_progress_line_of_the_optimization():
     from kite_rto.tools.progress import OptimizeProgress, eta_text
 
     per = {g: KiteRTOSettings(gradient=g).experiments_per_iteration() for g in ("forward", "central", "directional")}
-    assert per == {"forward": 4, "central": 7, "directional": 3}
+    assert per == {"forward": 4, "central": 7, "directional": 4}
     assert KiteRTOSettings(n_directions=1).experiments_per_iteration() == 2
     assert (eta_text(None), eta_text(42.4), eta_text(125)) == ("ETA ?", "ETA 42 s", "ETA 2 min 05 s")
     p = OptimizeProgress(n_iter=10, per_iteration=4)

@@ -339,7 +339,9 @@ def test_bad_controller_inputs_fly_bit_for_bit(probe, ros_env, request, tmp_path
             row.unsafe_setpoints = watch.unsafe_applied()
             assert sent[topic] >= 50 and lines, f"no warning for {topic}:\n{text[-3000:]}"
             assert len(lines) <= sent[topic] / 10
-            assert "nan" in lines[0].lower()                  # the first kind of every topic is NaN
+            # the warning names the rejected value (the first kind sent is NaN, but on a busy machine the latched
+            # or reliable history may hand the controller a later kind first)
+            assert re.search(r"nan|inf|\d", lines[0].lower().split(f"rejected {word}", 1)[1]), lines[0]
             if any("stamp" in k for k, _ in kinds):
                 assert any("stale or future" in ln for ln in lines), f"no stamp warning for {topic}"
             if topic == "/rto/setpoints":

@@ -41,7 +41,7 @@ from rosutil import Probe
 from storage_flight import Flight, compare
 
 pytestmark = [pytest.mark.faults]
-PER = 3                                                  # experiments of one iteration (directional, 2 directions)
+PER = KiteRTOSettings().experiments_per_iteration()      # experiments of one iteration (directional, 3 directions)
 # every write of a 2-iteration run: its start, the experiment-only writes, the writes that complete an iteration
 WRITES = ["start:1"] + [f"experiment:{n}" for n in range(1, 5)] + ["iteration:1", "iteration:2"]
 
@@ -179,7 +179,7 @@ def test_open_refuses_a_used_file_without_resume_or_with_other_settings(tmp_path
     db = tmp_path / "rto.sqlite"
     Flight(db, n_iter=1, settings={"n_laps": 1, "h_min": 10.0, "box_aspect": [0.16, 0.22]}).fly()
     before = digest(db)
-    with pytest.raises(RunDatabaseError, match=rf"database {db} holds a run \(3 experiments, 1 iterations\) and "
+    with pytest.raises(RunDatabaseError, match=rf"database {db} holds a run \({PER} experiments, 1 iterations\) and "
                                                "resume is false.*resume:=true, or to start a new run, move it aside"):
         open_run_database(db, {"n_laps": 1, "h_min": 10.0, "box_aspect": [0.16, 0.22]}, resume=False)
     with pytest.raises(RunDatabaseError) as err:
@@ -277,7 +277,7 @@ def test_used_database_without_resume_is_refused(request, ros_env, tmp_path):
         row.outcome = f"exit {code}: {refusal(code, out, tmp_path)}; file byte-identical: {digest(db) == before}"
         row.experiments_lost, row.unsafe_setpoints = 0, 0
         assert code == 2 and digest(db) == before, out
-        assert f"database {db} holds a run (3 experiments, 1 iterations) and resume is false" in out, out
+        assert f"database {db} holds a run ({PER} experiments, 1 iterations) and resume is false" in out, out
 
 
 @pytest.mark.ros

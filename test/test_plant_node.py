@@ -56,9 +56,15 @@ def test_lockstep_advances_one_step_per_answered_command(probe, ros_env):
             stamp = stamp_to_ns(last.header.stamp)
             cmd = JointState(name=["delta"], position=[0.1])
             cmd.header.stamp = last.header.stamp
-            steer.publish(cmd)
             answered.append(stamp)
-            assert probe.spin_until(lambda: stamp_to_ns(states[-1].header.stamp) > stamp, 10.0)
+            # steering is best effort, as from the controller: a command lost on a busy machine is answered again
+            # (for the same sample) until the plant steps, at most 60 s
+            end = time.monotonic() + 60.0
+            while True:
+                steer.publish(cmd)
+                if probe.spin_until(lambda: stamp_to_ns(states[-1].header.stamp) > stamp, 0.5):
+                    break
+                assert time.monotonic() < end, f"the plant did not step past {stamp} ns"
         # exactly one step (dt = 20 ms) per answered command
         assert [b - a for a, b in zip(answered, answered[1:])] == [20_000_000] * 24
         # without an answer the plant does not advance; it re-publishes the same sample
