@@ -31,7 +31,7 @@ __all__ = ["ModelUncertainty", "bound_activity_for", "privileged_directions_for"
 @dataclass(frozen=True)
 class ModelUncertainty:
     """Plausible deviations of the model parameters from their nominal values: a prior from the literature, not
-    the plant's values (docs/gma.md *The prior*).
+    the plant's values (docs/theory.md *The prior*).
 
     Each deviation is the far end of the range the literature reports around the nominal model, on the side a
     real kite usually lies; it is wider than, and not equal to, the default plant's own offset (E -0.4, g_s
