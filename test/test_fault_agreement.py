@@ -26,7 +26,9 @@ def _flight(ros_env, controller_params):
     ctrl = start_node("controller", controller_params, ros_env)
     try:
         assert probe.spin_until(lambda: probe.node.count_subscribers("/kite/state") > 0, 120.0)
-        plant = start_node("plant", {"duration": 20.0, "turbulence": False}, ros_env)
+        # long enough that the controller's parameter check (a service call to the plant) lands while the plant lives,
+        # also on a quiet, fast machine (20 s of lockstep flight took about 2 s there, too short)
+        plant = start_node("plant", {"duration": 300.0, "turbulence": False}, ros_env)
         plant_out = plant.communicate(timeout=300)[0]
         assert plant.returncode == 0, plant_out[-2000:]
     finally:
