@@ -48,7 +48,12 @@ def reaches(scenario: Scenario, oracle_tension_kn: float, c, fraction: float = 0
     """True if setpoints ``c`` (rad), flown on ``scenario``'s deterministic plant, give at least ``fraction`` of
     ``oracle_tension_kn`` (kN) with a minimum altitude of at least ``h_min - h_tol`` (m): :func:`judge`'s test of
     one iterate (the baselines' stop)."""
-    tension, z = plant_performance(scenario.plant, c)
+    return _passes(plant_performance(scenario.plant, c), scenario, oracle_tension_kn, fraction, h_tol)
+
+
+def _passes(performance: tuple, scenario: Scenario, oracle_tension_kn: float, fraction: float, h_tol: float) -> bool:
+    """The judge's test of one ``(tension kN, min altitude m)``."""
+    tension, z = performance
     return bool(tension >= fraction * oracle_tension_kn and z >= scenario.h_min - h_tol)
 
 
@@ -64,7 +69,7 @@ def judge(scenario: Scenario, oracle_tension_kn: float, iterates, times, fractio
     tension = tuple(float(t) for t, _ in perf)
     alt = tuple(float(z) for _, z in perf)
     floor = scenario.h_min - h_tol
-    reached = tuple(bool(t >= fraction * oracle_tension_kn and z >= floor) for t, z in perf)
+    reached = tuple(_passes(p, scenario, oracle_tension_kn, fraction, h_tol) for p in perf)
     k = next((i for i, r in enumerate(reached) if r), None)
     held = next((j for j in range(len(reached)) if all(reached[j:])), None)
     return Verdict(tension_kn=tension, min_altitude=alt,
