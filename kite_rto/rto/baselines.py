@@ -8,7 +8,8 @@
   noise level, upper confidence bound) on measured experiments in box-normalized shape coordinates.
 
 Each returns a :class:`BaselineRun`: the candidate setpoints it would recommend after each experiment and the
-flight time at which it could; :func:`time_to_target` judges the candidates on the deterministic plant.
+flight time at which it could; the campaign's :func:`kite_rto.campaign.judge.judge` judges the candidates on the
+deterministic plant.
 """
 from __future__ import annotations
 
@@ -18,12 +19,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .experiment import ExperimentSpec, PlantFlight
-from .oracle import plant_performance
 from ..flight.shape import ShapeBox
 from ..kite.plant import PlantConfig
 
-__all__ = ["BaselineRun", "model_only", "finite_difference_ascent", "nelder_mead_plant", "bayes_opt_plant",
-           "time_to_target"]
+__all__ = ["BaselineRun", "model_only", "finite_difference_ascent", "nelder_mead_plant", "bayes_opt_plant"]
 
 
 class _Budget(Exception):
@@ -185,18 +184,3 @@ def bayes_opt_plant(config: PlantConfig | None, seed: int, c0, budget: float,
             run.add(box.from_unit(x), fl.t)
     return _finish(run, fl)
 
-
-def time_to_target(candidates, times, config: PlantConfig | None, target_kn: float, h_min: float = 100.0,
-                   h_tol: float = 2.0) -> tuple:
-    """First ``(index, flight time s)`` whose candidate, re-flown on the deterministic plant, gives at least
-    ``target_kn`` with min altitude >= ``h_min - h_tol``; ``(None, inf)`` if none does. Candidates equal to
-    the previous one are not re-flown."""
-    last = None
-    for i, (c, t) in enumerate(zip(candidates, times)):
-        if last is not None and np.allclose(c, last, atol=1e-9):
-            continue
-        last = c
-        tension, z = plant_performance(config, c)
-        if tension >= target_kn and z >= h_min - h_tol:
-            return i, t
-    return None, math.inf
