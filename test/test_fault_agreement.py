@@ -8,8 +8,9 @@ import pytest
 
 from kite_rto.nodes.peer_check import compare
 
+from faultgraph import node, stop_all
 from faultlog import fault_row
-from rosutil import Probe, start_node, stop
+from rosutil import Probe
 
 pytestmark = [pytest.mark.ros]
 
@@ -21,20 +22,34 @@ def test_compare_separates_must_agree_from_model_parameters():
     assert compare(mine, {}) == ([], [])              # a plant that did not answer a name: nothing claimed
 
 
+CHECK_TIMEOUT = 120.0
+"""Wall s the controller gets to log its parameter check once the plant flies (it asks within a few seconds)."""
+
+
+def _checked(line: str) -> bool:
+    """A line of the controller's parameter check: an error per differing parameter, or the agreement line. All
+    lines of one check are logged in one callback, and a node stops only between callbacks: once one is out, all
+    are."""
+    return "differs from plant" in line or line.endswith(" agree")
+
+
 def _flight(ros_env, controller_params):
+    """Controller, then a plant that flies until stopped; both are stopped once the controller has logged its
+    check (or the plant exited): the verdict does not depend on how fast the flight runs."""
     probe = Probe("agreement_probe")
-    ctrl = start_node("controller", controller_params, ros_env)
+    ctrl = node("controller", "controller", ros_env, params=controller_params)
+    plant = None
     try:
-        assert probe.spin_until(lambda: probe.node.count_subscribers("/kite/state") > 0, 120.0)
-        # long enough that the controller's parameter check (a service call to the plant) lands while the plant lives,
-        # also on a quiet, fast machine (20 s of lockstep flight took about 2 s there, too short)
-        plant = start_node("plant", {"duration": 300.0, "turbulence": False}, ros_env)
-        plant_out = plant.communicate(timeout=300)[0]
-        assert plant.returncode == 0, plant_out[-2000:]
+        assert probe.spin_until(lambda: probe.node.count_subscribers("/kite/state") > 0, 120.0), ctrl.text()
+        plant = node("plant", "plant", ros_env, params={"duration": 0.0, "turbulence": False})
+        probe.spin_until(lambda: any(_checked(line) for line in list(ctrl.lines)) or not plant.alive(),
+                         CHECK_TIMEOUT)
+        assert plant.alive(), "plant exited before the controller's check:\n" + plant.text()[-2000:]
     finally:
-        out = stop(ctrl)
+        stop_all([ctrl, plant])
         probe.close()
-    return out
+    assert plant.proc.returncode == 0, plant.text()[-2000:]
+    return ctrl.text()
 
 
 @pytest.mark.faults
