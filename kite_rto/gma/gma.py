@@ -19,6 +19,7 @@ from .directional import DirectionalGradient
 from .effort import NoiseTest, average, fold_repeats, noise_test, repeat_requests
 from .gradients import FiniteDifferenceGradient, GradientEstimate, GradientEstimator, PlantPoint
 from .modifiers import Decision, ModelRealization, Modifiers
+from .noise_filter import noise_gain
 from .problem import ModelProblem
 from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
 from .settings import GMASettings, per_setpoint
@@ -526,14 +527,35 @@ class GMA:
         eps = nominal.constraints - model.g
         lam = est.cost - model.grad_phi
         mu = est.constraints - model.jac_g
-        b = self.settings.modifier_filter
-        prev = None if b == 1.0 else next((r for r in reversed(self.history.iterations)
-                                           if np.all(np.isfinite(r.lam)) and np.all(np.isfinite(r.mu))), None)
+        s = self.settings
+        b = s.modifier_filter
+        prev = None if b == 1.0 and s.modifier_drift is None else next(
+            (r for r in reversed(self.history.iterations)
+             if np.all(np.isfinite(r.lam)) and np.all(np.isfinite(r.mu))), None)
         if prev is not None and np.all(np.isfinite(lam)) and np.all(np.isfinite(mu)):
+            chain = self._noise_chain(c_k, est)
+            if chain is not None:
+                b, _ = noise_gain(*chain, s.modifier_drift, self._width)
+                notes.append(f"modifiers filtered by noise (gain {np.round(b, 3).tolist()})")
+            else:
+                notes.append(f"modifiers filtered (b = {b:g})")
             lam = (1.0 - b) * prev.lam + b * lam
             mu = (1.0 - b) * prev.mu.reshape(mu.shape) + b * mu
-            notes.append(f"modifiers filtered (b = {b:g})")
         return Modifiers(c_k, eps, lam, mu, self._backoff.copy())
+
+    def _noise_chain(self, c_k, est: GradientEstimate):
+        """``(points, stds)`` of the noise-matched modifier filter (:mod:`~kite_rto.gma.noise_filter`): the
+        iterations since the last one without finite modifiers or a standard deviation, then ``est``; ``None``
+        when the filter is off (``modifier_drift`` unset) or ``est`` has no standard deviation."""
+        if self.settings.modifier_drift is None or est.cost_std is None:
+            return None
+        points, stds = [c_k], [np.asarray(est.cost_std, float)]
+        for r in reversed(self.history.iterations):
+            if r.grad_cost_std is None or not (np.all(np.isfinite(r.lam)) and np.all(np.isfinite(r.mu))):
+                break
+            points.insert(0, r.c_k)
+            stds.insert(0, np.asarray(r.grad_cost_std, float))
+        return points, stds
 
     def _propose(self, mods: Modifiers, nominal: PlantPoint, model: ModelRealization, est: GradientEstimate,
                  radius_abs: np.ndarray, notes: list[str]) -> _Proposal:

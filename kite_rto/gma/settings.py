@@ -57,6 +57,11 @@ class GMASettings:
             ``lambda_k = (1 - b) lambda_{k-1} + b lambda_k^measured`` (and ``mu`` likewise), in ``(0, 1]``;
             1 = no filtering. Averages noisy plant-gradient estimates over iterations (Marchetti et al. 2009);
             ``eps_k`` is never filtered.
+        modifier_drift: ``None`` (default): the fixed filter ``modifier_filter``. A number ``q >= 0`` replaces it
+            by a filter matched to the gradient noise (:mod:`~kite_rto.gma.noise_filter`): per setpoint, a
+            Kalman gain from the estimate's standard deviation and the filtered modifier's variance, which grows
+            by ``(q |step / w|)^2`` per step; ``q`` bounds the plant-model curvature mismatch, cost units per
+            squared box width. Needs the estimates' ``cost_std`` (without it the fixed filter applies).
         trust_radius: initial trust-region half-width of the box ``|y(u) - c_k| <= Delta`` imposed in the
             modified problem, relative to the setpoint box width; ``> 0``, ``inf`` disables the trust region.
         trust_adapt: adapt the trust radius per setpoint: shrink it by ``trust_shrink`` when the step in that
@@ -132,6 +137,7 @@ class GMASettings:
 
     filter_gain: Scalar = 0.5
     modifier_filter: float = 1.0
+    modifier_drift: float | None = None
     trust_radius: Scalar = 0.25
     trust_adapt: bool = True
     trust_shrink: float = 0.5
@@ -165,6 +171,8 @@ class GMASettings:
     def __post_init__(self):
         _check("filter_gain", self.filter_gain, 0.0, 1.0, low_open=True)
         _check("modifier_filter", self.modifier_filter, 0.0, 1.0, low_open=True)
+        if self.modifier_drift is not None:
+            _check("modifier_drift", self.modifier_drift, 0.0, None)
         _check("trust_radius", self.trust_radius, 0.0, None, low_open=True, inf_ok=True)
         if not isinstance(self.trust_adapt, bool):
             raise ValueError(f"GMASettings.trust_adapt={self.trust_adapt!r}: expected True or False")

@@ -52,6 +52,9 @@ PARAMS = (
     ParamSpec("filter_gain", _S.gma.filter_gain, "GMA input filter K", 0.01, 1.0, unit="dimensionless"),
     ParamSpec("modifier_filter", _S.gma.modifier_filter, "GMA filter on the gradient modifiers (1 = none)", 0.01, 1.0,
               unit="dimensionless"),
+    ParamSpec("modifier_drift", -1.0 if _S.gma.modifier_drift is None else _S.gma.modifier_drift,
+              "GMA modifier filter matched to the gradient noise: bound on the plant-model curvature mismatch "
+              "(negative = off: the fixed modifier_filter)", -1.0, 1.0e6, unit="cost units per squared box width"),
     ParamSpec("trust_radius", _S.gma.trust_radius, "initial trust radius (not below GMA's minimum trust radius)",
               _S.gma.trust_radius_min, 10.0, unit="fraction of the box width"),
     ParamSpec("box_theta_0_deg", [round(math.degrees(v), 9) for v in _S.box.theta_0], "optimizer's theta_0 range [low, high]",
@@ -112,6 +115,7 @@ def settings_from_params(v: dict) -> KiteRTOSettings:
         return replace(_S, experiment=spec, box=_shape_box(v), gradient=v["gradient"],
                        n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3
                        ).with_gma(filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
+                                  modifier_drift=None if v["modifier_drift"] < 0 else v["modifier_drift"],
                                   trust_radius=v["trust_radius"])
     except ValueError as err:
         raise ParameterError(str(err)) from None

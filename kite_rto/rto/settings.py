@@ -6,11 +6,14 @@ numbers) and reported on all twelve. With the literature prior of :class:`~kite_
 no setpoint bound is robustly active (theta_0's gradient changes by more than half its size under the prior), so
 DMA measures along all three privileged directions: 4 experiments per iteration. In the 3-D field a 4-lap
 experiment's observer-normalized mean scatters by 6.6-8.3 kN, comparable to the cost differences near the optimum,
-so GMA averages its gradient modifiers over iterations (``modifier_filter`` 0.5; the first iteration takes its
-measurement unfiltered) and sizes every step so that the altitude constraint, predicted from its measured value
-and gradient with 2 standard deviations and a curvature bound of 20 m per squared box width learned upwards from
-the steps, stays within 1 m (safe steps, :mod:`~kite_rto.gma.safety`). Full steps (filter gain 1) inside a trust
-region of 0.7 box widths keep the first iteration's large correction; the 6 m altitude back-off stays.
+so GMA averages its gradient modifiers over iterations with a gain matched to the noise
+(:mod:`~kite_rto.gma.noise_filter`, ``modifier_drift`` 5: close to 1 after a long step, the running mean at a point
+it stays at; the first iteration takes its measurement unfiltered) and sizes every step so that the altitude
+constraint, predicted from its measured value and gradient with 2 standard deviations and a curvature bound of
+20 m per squared box width learned upwards from the steps, stays within 1 m (safe steps,
+:mod:`~kite_rto.gma.safety`). Full steps (filter gain 1) inside a trust region of 0.7 box widths keep the first
+iteration's large correction. The altitude back-off is 3 m: the minimum altitude is measured to 0.1-0.3 m, and
+6 m cost about 1 % where the constraint binds hard (h_min 115 m).
 """
 from __future__ import annotations
 
@@ -31,10 +34,12 @@ GRADIENTS = ("directional", "forward", "central", "least_squares")
 
 def default_gma_settings() -> GMASettings:
     """GMA's settings on the kite (see the module docstring): full steps (filter gain 1) inside a trust region of
-    0.7 box widths (adapted down to 0.05), modifier filter 0.5, 6 m altitude back-off, safe steps (curvature bound
-    20 m per squared box width, 2 standard deviations, 1 m tolerance), ``tol_c`` 1e-3."""
-    return GMASettings(filter_gain=1.0, modifier_filter=0.5, trust_radius=0.7, trust_radius_min=0.05, backoff=6.0,
-                       safe_curvature=20.0, safe_sigma=2.0, safe_tolerance=1.0, tol_c=1e-3)
+    0.7 box widths (adapted down to 0.05), the modifier filter matched to the noise (drift bound 5 cost units per
+    squared box width; the fixed filter 0.5 where an estimate has no standard deviation), 3 m altitude back-off,
+    safe steps (curvature bound 20 m per squared box width, 2 standard deviations, 1 m tolerance), ``tol_c`` 1e-3."""
+    return GMASettings(filter_gain=1.0, modifier_filter=0.5, modifier_drift=5.0, trust_radius=0.7,
+                       trust_radius_min=0.05, backoff=3.0, safe_curvature=20.0, safe_sigma=2.0, safe_tolerance=1.0,
+                       tol_c=1e-3)
 
 
 @dataclass(frozen=True)
