@@ -530,8 +530,7 @@ class GMA:
         s = self.settings
         b = s.modifier_filter
         prev = None if b == 1.0 and s.modifier_drift is None else next(
-            (r for r in reversed(self.history.iterations)
-             if np.all(np.isfinite(r.lam)) and np.all(np.isfinite(r.mu))), None)
+            (r for r in reversed(self.history.iterations) if _finite_modifiers(r)), None)
         if prev is not None and np.all(np.isfinite(lam)) and np.all(np.isfinite(mu)):
             chain = self._noise_chain(c_k, est)
             if chain is not None:
@@ -551,7 +550,7 @@ class GMA:
             return None
         points, stds = [c_k], [np.asarray(est.cost_std, float)]
         for r in reversed(self.history.iterations):
-            if r.grad_cost_std is None or not (np.all(np.isfinite(r.lam)) and np.all(np.isfinite(r.mu))):
+            if r.grad_cost_std is None or not _finite_modifiers(r):
                 break
             points.insert(0, r.c_k)
             stds.insert(0, np.asarray(r.grad_cost_std, float))
@@ -597,6 +596,11 @@ class GMA:
         hit = (np.abs(proposed) >= 0.999 * radius_abs) & ~flip
         self._radius = np.where(flip, np.maximum(self._radius * s.trust_shrink, s.trust_radius_min), self._radius)
         self._radius = np.where(hit, np.minimum(self._radius * s.trust_grow, self._radius0), self._radius)
+
+
+def _finite_modifiers(record: IterationRecord) -> bool:
+    """The record's gradient modifiers ``lam`` and ``mu`` are finite (usable by the modifier filters)."""
+    return bool(np.all(np.isfinite(record.lam)) and np.all(np.isfinite(record.mu)))
 
 
 def _plant_point(request: ExperimentRequest, result: ExperimentResult) -> PlantPoint:

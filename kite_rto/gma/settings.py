@@ -59,9 +59,9 @@ class GMASettings:
             ``eps_k`` is never filtered.
         modifier_drift: ``None`` (default): the fixed filter ``modifier_filter``. A number ``q >= 0`` replaces it
             by a filter matched to the gradient noise (:mod:`~kite_rto.gma.noise_filter`): per setpoint, a
-            Kalman gain from the estimate's standard deviation and the filtered modifier's variance, which grows
-            by ``(q |step / w|)^2`` per step; ``q`` bounds the plant-model curvature mismatch, cost units per
-            squared box width. Needs the estimates' ``cost_std`` (without it the fixed filter applies).
+            Kalman gain from the estimates' standard deviations (pooled over the iterations) and the filtered
+            modifier's variance, which grows by ``(q |step / w|)^2`` per step; ``q`` bounds the plant-model
+            curvature mismatch, cost units per squared box width. Needs the estimates' ``cost_std`` (without it the fixed filter applies).
         trust_radius: initial trust-region half-width of the box ``|y(u) - c_k| <= Delta`` imposed in the
             modified problem, relative to the setpoint box width; ``> 0``, ``inf`` disables the trust region.
         trust_adapt: adapt the trust radius per setpoint: shrink it by ``trust_shrink`` when the step in that
