@@ -18,6 +18,7 @@ from ._nlp import ModifiedNLP, NLPPair, RealizationNLP
 from .directional import DirectionalGradient
 from .effort import NoiseTest, average, fold_repeats, noise_test, repeat_requests
 from .gradients import FiniteDifferenceGradient, GradientEstimate, GradientEstimator, PlantPoint
+from .model_secant import model_secant_estimate
 from .modifiers import Decision, ModelRealization, Modifiers
 from .noise_filter import noise_gain
 from .problem import ModelProblem
@@ -451,8 +452,26 @@ class GMA:
         """The plant gradients at ``c_k`` from this iteration's experiments and the earlier ones."""
         past = self._points(exclude_iteration=self._k)
         if self.gradient.uses_model:
-            return self.gradient.estimate(c_k, nominal, new, past, model=model)
-        return self.gradient.estimate(c_k, nominal, new, past)
+            est = self.gradient.estimate(c_k, nominal, new, past, model=model)
+        else:
+            est = self.gradient.estimate(c_k, nominal, new, past)
+        if not (self.settings.model_secant and model.success and est.quality > 0
+                and np.all(np.isfinite(est.cost)) and np.all(np.isfinite(est.constraints))):
+            return est
+        est, note = model_secant_estimate(self.gradient, est, c_k, nominal, new, past, model,
+                                          lambda c: self._model_values(c, model.u))
+        est.notes = "; ".join(n for n in (est.notes, note) if n)
+        return est
+
+    def _model_values(self, c, x0) -> tuple:
+        """``(phi_hat, g_hat)`` of the model's realization of ``c`` (``min phi s.t. y(u) = c``, started from
+        ``x0``; the solver's last solution is kept), NaN when it fails: the model side of ``model_secant``."""
+        pr = self.problem
+        res = self.realization_nlp.solve(np.asarray(c, float), x0, keep=False)
+        if not res.success:
+            return np.nan, np.full(pr.n_g, np.nan)
+        phi, g, _ = pr.evaluate(res.x)
+        return phi, g
 
     def _check_structure(self, c_k, nominal: PlantPoint, new: list[PlantPoint], struct: list[PlantPoint],
                          model: ModelRealization, est: GradientEstimate, notes: list[str]):

@@ -93,6 +93,10 @@ class GMASettings:
             from the multipliers of ``y(u) = c_k`` and ``grad_c g_hat`` from central differences of re-solves;
             exact when the modified constraints are inactive at the plant optimum or depend on ``u`` only
             through ``y(u)``.
+        model_secant: take the gradient modifiers from the model's own difference quotients over the points the
+            plant flew (:mod:`~kite_rto.gma.model_secant`): ``lambda = secant_p - secant_hat`` instead of
+            ``secant_p - grad phi_hat``, so that the finite differences' truncation error cancels up to the
+            plant-model curvature mismatch; one model solve per point used. Off by default.
         settle_time: hint copied into every :class:`ExperimentRequest` (generic units, e.g. s or laps), ``>= 0``.
         averaging: averaging-length hint copied into every request (generic units), ``> 0``.
         structure_check_every: measured structure check (issue #14 item 2, ``docs/gma.md``): every this many
@@ -151,6 +155,7 @@ class GMASettings:
     tol_c: float = 1e-4
     model_fd_step: float = 1e-4
     model_point: str = "consistent"
+    model_secant: bool = False
     settle_time: float = 0.0
     averaging: float = 1.0
     structure_check_every: int = 0
@@ -190,6 +195,8 @@ class GMASettings:
         if self.model_point not in ("consistent", "realization"):
             raise ValueError(f"GMASettings.model_point={self.model_point!r}: expected 'consistent' or "
                              f"'realization'")
+        if not isinstance(self.model_secant, bool):
+            raise ValueError(f"GMASettings.model_secant={self.model_secant!r}: expected True or False")
         _check("settle_time", self.settle_time, 0.0, None)
         _check("averaging", self.averaging, 0.0, None, low_open=True)
         if isinstance(self.structure_check_every, bool) or not isinstance(self.structure_check_every, int) \
