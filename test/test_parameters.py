@@ -149,6 +149,17 @@ def test_plant_defaults_are_the_plant_config_defaults():
                                                "wait_subscribers", "resend_period", "one_plant_check"}
 
 
+def test_optimizer_defaults_build_the_kite_defaults_and_gma_switches_reach_gma():
+    """The optimizer's parameter defaults build KiteRTOSettings() back; the GMA switches land in its GMASettings
+    (modifier_drift's negative sentinel = off, model_secant)."""
+    from kite_rto.nodes.optimizer_params import PARAMS, settings_from_params
+    from kite_rto.rto.settings import KiteRTOSettings
+    v = {s.name: s.default for s in PARAMS}
+    assert settings_from_params(v) == KiteRTOSettings()
+    s = settings_from_params({**v, "modifier_drift": -1.0, "model_secant": not v["model_secant"]})
+    assert s.gma.modifier_drift is None and s.gma.model_secant is (not v["model_secant"])
+
+
 def test_path_controller_retune():
     c = PathController(shared_model(), KiteParams(), DEFAULT_SETPOINTS, ControllerSettings())
     with pytest.raises(ValueError, match="dead_time cannot change in flight"):

@@ -55,6 +55,9 @@ PARAMS = (
     ParamSpec("modifier_drift", -1.0 if _S.gma.modifier_drift is None else _S.gma.modifier_drift,
               "GMA modifier filter matched to the gradient noise: bound on the plant-model curvature mismatch "
               "(negative = off: the fixed modifier_filter)", -1.0, 1.0e6, unit="cost units per squared box width"),
+    ParamSpec("model_secant", _S.gma.model_secant, "GMA gradient modifiers from the model's own difference "
+              "quotients over the flown points (cancels the finite differences' truncation error up to the "
+              "plant-model curvature mismatch; false: plant quotient minus the model's gradient)"),
     ParamSpec("trust_radius", _S.gma.trust_radius, "initial trust radius (not below GMA's minimum trust radius)",
               _S.gma.trust_radius_min, 10.0, unit="fraction of the box width"),
     ParamSpec("box_theta_0_deg", [round(math.degrees(v), 9) for v in _S.box.theta_0], "optimizer's theta_0 range [low, high]",
@@ -116,6 +119,6 @@ def settings_from_params(v: dict) -> KiteRTOSettings:
                        n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3
                        ).with_gma(filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
                                   modifier_drift=None if v["modifier_drift"] < 0 else v["modifier_drift"],
-                                  trust_radius=v["trust_radius"])
+                                  model_secant=v["model_secant"], trust_radius=v["trust_radius"])
     except ValueError as err:
         raise ParameterError(str(err)) from None
