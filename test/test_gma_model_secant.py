@@ -104,3 +104,29 @@ def test_a_model_that_cannot_realize_a_point_leaves_the_plant_estimate():
 def test_bad_setting_is_named():
     with pytest.raises(ValueError, match="model_secant='yes': expected True or False"):
         GMASettings(model_secant="yes")
+
+
+def test_cost_only_keeps_the_plant_constraint_quotients():
+    """``model_secant_constraints=False``: the cost gradient gets the model's truncation correction, the constraints'
+    Jacobian stays the plant's difference quotient."""
+    fd = FiniteDifferenceGradient(0.5)
+    c_k = np.zeros(2)
+
+    def values(c):             # curved cost and constraint; the model's gradient at 0 is zero for both
+        return float(c @ c), np.array([c[0] ** 2])
+
+    def pt(c):
+        phi, g = values(c)
+        return PlantPoint(np.asarray(c, float), phi, g, 0.01)
+    new = [pt(p) for p in fd.plan(c_k, -np.ones(2), np.ones(2))]
+    plant_est = fd.estimate(c_k, pt(c_k), new)
+    np.testing.assert_allclose(plant_est.cost, [0.5, 0.5])                 # the secant, h f''/2
+    m = type("M", (), {"grad_phi": np.zeros(2), "jac_g": np.zeros((1, 2))})()
+    full, _ = model_secant_estimate(fd, plant_est, c_k, pt(c_k), new, [], m, values)
+    cost_only, _ = model_secant_estimate(fd, plant_est, c_k, pt(c_k), new, [], m, values, constraints=False)
+    np.testing.assert_allclose(full.cost, [0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(full.constraints, [[0.0, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(cost_only.cost, [0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(cost_only.constraints, plant_est.constraints)
+    with pytest.raises(ValueError, match="model_secant_constraints=1: expected True or False"):
+        GMASettings(model_secant_constraints=1)

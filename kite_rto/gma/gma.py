@@ -459,7 +459,8 @@ class GMA:
                 and np.all(np.isfinite(est.cost)) and np.all(np.isfinite(est.constraints))):
             return est
         est, note = model_secant_estimate(self.gradient, est, c_k, nominal, new, past, model,
-                                          lambda c: self._model_values(c, model.u))
+                                          lambda c: self._model_values(c, model.u),
+                                          self.settings.model_secant_constraints)
         est.notes = "; ".join(n for n in (est.notes, note) if n)
         return est
 

@@ -64,7 +64,7 @@ class ModelPoint:
 
 def model_secant_estimate(estimator: GradientEstimator, plant: GradientEstimate, c_k, nominal: PlantPoint,
                           new: Sequence[PlantPoint], past: Sequence[PlantPoint], model,
-                          evaluate: Callable[[np.ndarray], tuple]) -> tuple:
+                          evaluate: Callable[[np.ndarray], tuple], constraints: bool = True) -> tuple:
     """The plant estimate ``plant`` corrected by the model's truncation error (module docstring).
 
     Args:
@@ -75,6 +75,8 @@ def model_secant_estimate(estimator: GradientEstimator, plant: GradientEstimate,
         model: the model's linearization at ``c_k`` (:class:`~kite_rto.gma.ModelRealization`: ``grad_phi``,
             ``jac_g``).
         evaluate: ``c -> (phi_hat, g_hat)`` of the model (NaN where it cannot realize ``c``).
+        constraints: correct the constraints' Jacobian too (False: only the cost gradient; the constraints keep
+            the plant's quotients).
 
     Returns ``(estimate, note)``: ``plant`` with ``grad phi_hat + secant_p - secant_hat`` (constraints likewise),
     same quality and standard deviations; ``plant`` itself when the model's secant is not finite (the note says
@@ -89,7 +91,9 @@ def model_secant_estimate(estimator: GradientEstimator, plant: GradientEstimate,
     g_phi = np.asarray(model.grad_phi, float).ravel()
     j_g = np.asarray(model.jac_g, float).reshape(-1, n_c)
     cost = plant.cost - own.cost + g_phi
-    cons = plant.constraints.reshape(j_g.shape) - own.constraints.reshape(j_g.shape) + j_g
+    cons = plant.constraints.reshape(j_g.shape)
+    if constraints:
+        cons = cons - own.constraints.reshape(j_g.shape) + j_g
     if not (np.all(np.isfinite(cost)) and np.all(np.isfinite(cons))):
         return plant, "model secant not finite: the plant's difference quotients used as they are"
     diff = g_phi - own.cost

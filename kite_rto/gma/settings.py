@@ -97,6 +97,8 @@ class GMASettings:
             plant flew (:mod:`~kite_rto.gma.model_secant`): ``lambda = secant_p - secant_hat`` instead of
             ``secant_p - grad phi_hat``, so that the finite differences' truncation error cancels up to the
             plant-model curvature mismatch; one model solve per point used. Off by default.
+        model_secant_constraints: with ``model_secant``, correct the constraints' gradient modifiers too (False:
+            the cost's only, the constraints keep ``secant_p - grad g_hat``).
         settle_time: hint copied into every :class:`ExperimentRequest` (generic units, e.g. s or laps), ``>= 0``.
         averaging: averaging-length hint copied into every request (generic units), ``> 0``.
         structure_check_every: measured structure check (issue #14 item 2, ``docs/gma.md``): every this many
@@ -156,6 +158,7 @@ class GMASettings:
     model_fd_step: float = 1e-4
     model_point: str = "consistent"
     model_secant: bool = False
+    model_secant_constraints: bool = True
     settle_time: float = 0.0
     averaging: float = 1.0
     structure_check_every: int = 0
@@ -197,6 +200,9 @@ class GMASettings:
                              f"'realization'")
         if not isinstance(self.model_secant, bool):
             raise ValueError(f"GMASettings.model_secant={self.model_secant!r}: expected True or False")
+        if not isinstance(self.model_secant_constraints, bool):
+            raise ValueError(f"GMASettings.model_secant_constraints={self.model_secant_constraints!r}: expected "
+                             f"True or False")
         _check("settle_time", self.settle_time, 0.0, None)
         _check("averaging", self.averaging, 0.0, None, low_open=True)
         if isinstance(self.structure_check_every, bool) or not isinstance(self.structure_check_every, int) \
