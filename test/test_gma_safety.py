@@ -17,7 +17,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from kite_rto.gma import GMA, GMASettings, ModelProblem, run_offline
+from kite_rto.gma import GMA, FiniteDifferenceGradient, GMASettings, ModelProblem, run_offline
 from kite_rto.gma.safety import observed_curvature, safe_fraction
 
 
@@ -82,3 +82,30 @@ def test_safe_settings_are_validated(field, value, expected):
     with pytest.raises(ValueError, match=expected):
         GMASettings(**{field: value})
     assert GMASettings().safe_curvature is None            # off by default
+
+
+@pytest.mark.parametrize("filtered", [False, True])
+def test_safe_filtered_predicts_with_the_modified_problems_jacobian(filtered):
+    """With a modifier filter the raw constraint gradient (this iteration's estimate) and the modified problem's
+    (model plus the filtered mu) differ on a plant that curves; ``safe_filtered`` predicts the constraint's change
+    with the latter. Each safe-step note's predicted change is that Jacobian times the unscaled step."""
+    import re
+    u = ca.SX.sym("u", 1)
+    pr = ModelProblem(u=u, cost=-u[0], constraints=u[0] - 1.0, outputs=u, lbu=-5, ubu=5, u0=[0], c_lb=[-2], c_ub=[3],
+                      name="safe_filtered")
+    gma = GMA(pr, GMASettings(filter_gain=1.0, trust_radius=0.2, modifier_filter=0.3, safe_curvature=0.0,
+                              safe_tolerance=0.0, safe_sigma=0.0, safe_filtered=filtered),
+              FiniteDifferenceGradient(0.2), c0=[0.0])
+    run_offline(gma, lambda c: (-c[0], np.array([c[0] - 1.0 + 0.8 * (c[0] - 0.5) ** 2])), 8)
+    checked = 0
+    for r in gma.records:
+        for note in r.notes:
+            m = re.match(r"safe step: scaled by ([0-9.e+-]+) .*predicted change ([0-9.e+-]+),", note)
+            if not m or float(m.group(1)) == 0:
+                continue
+            J = (r.jac_g_hat + r.mu).ravel()[0] if filtered else r.jac_constraints.ravel()[0]
+            assert float(m.group(2)) == pytest.approx(J * r.step[0] / float(m.group(1)), rel=2e-3)
+            checked += 1
+    assert checked >= 2
+    with pytest.raises(ValueError, match="safe_filtered='no': expected True or False"):
+        GMASettings(safe_filtered="no")

@@ -364,7 +364,11 @@ class GMA:
         step = c_next - c_k
         unscaled, alpha = step.copy(), 1.0
         if prop.decision is Decision.STEP and pr.n_g and s.safe_curvature is not None:
-            alpha = self._safe_alpha(step, nominal, est, notes)
+            safe_est = est
+            if s.safe_filtered and np.all(np.isfinite(model.jac_g)):     # the modified problem's own Jacobian
+                safe_est = replace(est, constraints=np.asarray(model.jac_g, float).reshape(pr.n_g, pr.n_c)
+                                   + prop.modifiers.mu.reshape(pr.n_g, pr.n_c))
+            alpha = self._safe_alpha(step, nominal, safe_est, notes)
             step = alpha * step
             c_next = c_k + step
         radius_used = self._radius.copy()

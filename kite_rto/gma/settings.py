@@ -129,6 +129,10 @@ class GMASettings:
         safe_sigma: standard deviations of the measured constraint and of the predicted change, ``>= 0``.
         safe_tolerance: how far the plant's constraints may be exceeded, constraint units, ``>= 0``; scalar or
             one per constraint.
+        safe_filtered: predict the constraints' change over the step with the modified problem's Jacobian
+            (model plus the filtered ``mu``, the one the step was chosen with) instead of this iteration's raw
+            estimate; with a modifier filter the two differ, and the raw one can veto every step the filtered one
+            proposes. Off by default.
         safe_adapt_min_step: steps shorter than this (largest component, box widths) do not update ``M``
             (their gradient error over the step would look like curvature), ``>= 0``.
         noise_ratio: effort matched to noise (issue #14 item 4, :mod:`~kite_rto.gma.effort`): the nominal and
@@ -171,6 +175,7 @@ class GMASettings:
     safe_sigma: float = 2.0
     safe_tolerance: Scalar = 0.0
     safe_adapt_min_step: float = 0.01
+    safe_filtered: bool = False
     noise_ratio: float = 0.5
     max_repeats_noise: int = 0
     max_ipopt_iter: int = 1000
@@ -223,6 +228,8 @@ class GMASettings:
         _check("safe_sigma", self.safe_sigma, 0.0, None)
         _check("safe_tolerance", self.safe_tolerance, 0.0, None)
         _check("safe_adapt_min_step", self.safe_adapt_min_step, 0.0, None)
+        if not isinstance(self.safe_filtered, bool):
+            raise ValueError(f"GMASettings.safe_filtered={self.safe_filtered!r}: expected True or False")
         _check("noise_ratio", self.noise_ratio, 0.0, None, low_open=True)
         if isinstance(self.max_repeats_noise, bool) or not isinstance(self.max_repeats_noise, int) \
                 or self.max_repeats_noise < 0:
