@@ -455,10 +455,7 @@ class GMA:
                   ) -> GradientEstimate:
         """The plant gradients at ``c_k`` from this iteration's experiments and the earlier ones."""
         past = self._points(exclude_iteration=self._k)
-        if self.gradient.uses_model:
-            est = self.gradient.estimate(c_k, nominal, new, past, model=model)
-        else:
-            est = self.gradient.estimate(c_k, nominal, new, past)
+        est = self.gradient.estimate_at(c_k, nominal, new, past, model)
         if not (self.settings.model_secant and model.success and est.quality > 0
                 and np.all(np.isfinite(est.cost)) and np.all(np.isfinite(est.constraints))):
             return est
@@ -470,7 +467,7 @@ class GMA:
 
     def _model_values(self, c, x0) -> tuple:
         """``(phi_hat, g_hat)`` of the model's realization of ``c`` (``min phi s.t. y(u) = c``, started from
-        ``x0``; the solver's last solution is kept), NaN when it fails: the model side of ``model_secant``."""
+        ``x0``; the solver's remembered solution is not replaced), NaN when it fails: the model side of ``model_secant``."""
         pr = self.problem
         res = self.realization_nlp.solve(np.asarray(c, float), x0, keep=False)
         if not res.success:

@@ -78,6 +78,13 @@ class GradientEstimator(ABC):
                  past: Sequence[PlantPoint]) -> GradientEstimate:
         """Gradient estimate at ``c_k`` from the nominal result, the planned results and past points."""
 
+    def estimate_at(self, c_k, nominal, new, past, model=None) -> GradientEstimate:
+        """:meth:`estimate`, handing over the model's linearization ``model`` when the strategy
+        :attr:`uses_model`."""
+        if self.uses_model:
+            return self.estimate(c_k, nominal, new, past, model=model)
+        return self.estimate(c_k, nominal, new, past)
+
 
 def _positive(name: str, value) -> np.ndarray:
     arr = np.atleast_1d(np.asarray(value, dtype=float)).ravel()

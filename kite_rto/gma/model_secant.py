@@ -85,8 +85,8 @@ def model_secant_estimate(estimator: GradientEstimator, plant: GradientEstimate,
     def as_model(p):
         return ModelPoint(p, evaluate)
 
-    args = (c_k, as_model(nominal), [as_model(p) for p in new], [as_model(p) for p in past])
-    own = estimator.estimate(*args, model=model) if estimator.uses_model else estimator.estimate(*args)
+    own = estimator.estimate_at(c_k, as_model(nominal), [as_model(p) for p in new], [as_model(p) for p in past],
+                                model)
     n_c = np.size(c_k)
     g_phi = np.asarray(model.grad_phi, float).ravel()
     j_g = np.asarray(model.jac_g, float).reshape(-1, n_c)

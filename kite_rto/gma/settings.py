@@ -36,6 +36,12 @@ def _check(name: str, value, low=None, high=None, *, low_open=False, high_open=F
         raise ValueError(f"GMASettings.{name}={value!r}: expected a number or a non-empty sequence")
 
 
+def _check_bool(name: str, value) -> None:
+    """Raise ``ValueError`` naming the field and value unless ``value`` is True or False."""
+    if not isinstance(value, bool):
+        raise ValueError(f"GMASettings.{name}={value!r}: expected True or False")
+
+
 def per_setpoint(name: str, value, n: int) -> np.ndarray:
     """Broadcast a scalar-or-sequence setting to shape ``(n,)``; ``ValueError`` on a length mismatch."""
     arr = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
@@ -187,8 +193,7 @@ class GMASettings:
         if self.modifier_drift is not None:
             _check("modifier_drift", self.modifier_drift, 0.0, None)
         _check("trust_radius", self.trust_radius, 0.0, None, low_open=True, inf_ok=True)
-        if not isinstance(self.trust_adapt, bool):
-            raise ValueError(f"GMASettings.trust_adapt={self.trust_adapt!r}: expected True or False")
+        _check_bool("trust_adapt", self.trust_adapt)
         _check("trust_shrink", self.trust_shrink, 0.0, 1.0, low_open=True, high_open=True)
         _check("trust_grow", self.trust_grow, 1.0, None)
         _check("trust_radius_min", self.trust_radius_min, 0.0, None, low_open=True)
@@ -203,11 +208,8 @@ class GMASettings:
         if self.model_point not in ("consistent", "realization"):
             raise ValueError(f"GMASettings.model_point={self.model_point!r}: expected 'consistent' or "
                              f"'realization'")
-        if not isinstance(self.model_secant, bool):
-            raise ValueError(f"GMASettings.model_secant={self.model_secant!r}: expected True or False")
-        if not isinstance(self.model_secant_constraints, bool):
-            raise ValueError(f"GMASettings.model_secant_constraints={self.model_secant_constraints!r}: expected "
-                             f"True or False")
+        _check_bool("model_secant", self.model_secant)
+        _check_bool("model_secant_constraints", self.model_secant_constraints)
         _check("settle_time", self.settle_time, 0.0, None)
         _check("averaging", self.averaging, 0.0, None, low_open=True)
         if isinstance(self.structure_check_every, bool) or not isinstance(self.structure_check_every, int) \
@@ -218,8 +220,7 @@ class GMASettings:
         _check("structure_step", self.structure_step, 0.0, 1.0, low_open=True)
         _check("structure_sigma", self.structure_sigma, 0.0, None)
         _check("structure_rel_tol", self.structure_rel_tol, 0.0, None)
-        if not isinstance(self.structure_kkt, bool):
-            raise ValueError(f"GMASettings.structure_kkt={self.structure_kkt!r}: expected True or False")
+        _check_bool("structure_kkt", self.structure_kkt)
         if self.structure_kkt and not self.structure_stall > 0:
             raise ValueError(f"GMASettings.structure_kkt=True with structure_stall={self.structure_stall!r}: "
                              f"expected structure_stall > 0 (the test runs at a stalled iterate)")
@@ -228,8 +229,7 @@ class GMASettings:
         _check("safe_sigma", self.safe_sigma, 0.0, None)
         _check("safe_tolerance", self.safe_tolerance, 0.0, None)
         _check("safe_adapt_min_step", self.safe_adapt_min_step, 0.0, None)
-        if not isinstance(self.safe_filtered, bool):
-            raise ValueError(f"GMASettings.safe_filtered={self.safe_filtered!r}: expected True or False")
+        _check_bool("safe_filtered", self.safe_filtered)
         _check("noise_ratio", self.noise_ratio, 0.0, None, low_open=True)
         if isinstance(self.max_repeats_noise, bool) or not isinstance(self.max_repeats_noise, int) \
                 or self.max_repeats_noise < 0:
