@@ -72,6 +72,7 @@ class GMA:
         self._backoff = per_setpoint("backoff", s.backoff, n_g) if n_g else np.zeros(0)
         self.gradient = gradient if gradient is not None else FiniteDifferenceGradient(0.01 * self._width)
         self._nlps = NLPPair(problem, s)
+        self._spread = np.zeros(n_c)      # sigma of the pessimistic cost (cost_sigma), set by _modifiers
         if history is not None:
             self.history = deepcopy(history)
             self._resume()
@@ -373,7 +374,7 @@ class GMA:
             c_next = c_k + step
         radius_used = self._radius.copy()
         self._adapt_trust_region(step, prop.c_star - c_k, radius_abs)
-        if alpha < 1.0:     # the modified problem disagrees with the measured plant: trust it less
+        if alpha < 1.0 and s.safe_shrink:   # the modified problem disagrees with the measured plant: trust it less
             self._radius = np.maximum(self._radius * s.trust_shrink, s.trust_radius_min)
         decision, detail = prop.decision, prop.detail
         if decision is Decision.STEP and bool(np.all(np.abs(unscaled) <= s.tol_c * self._width)):
@@ -532,7 +533,7 @@ class GMA:
         if j is not None:
             notes.append(f"safe step: scaled by {alpha:.3g} (g[{j}] = {nominal.constraints[j]:+.4g}, predicted "
                          f"change {float(est.constraints.reshape(n_g, -1)[j] @ step):+.4g}, curvature bound "
-                         f"{M[j]:.4g}); trust region shrunk")
+                         f"{M[j]:.4g})" + ("; trust region shrunk" if s.safe_shrink else ""))
         return alpha
 
     def _restored_column(self, dc: np.ndarray) -> np.ndarray:
@@ -552,16 +553,48 @@ class GMA:
         b = s.modifier_filter
         prev = None if b == 1.0 and s.modifier_drift is None else next(
             (r for r in reversed(self.history.iterations) if _finite_modifiers(r)), None)
+        own_std = np.zeros(self.problem.n_c) if est.cost_std is None else np.asarray(est.cost_std, float)
+        self._spread = own_std
         if prev is not None and np.all(np.isfinite(lam)) and np.all(np.isfinite(mu)):
             chain = self._noise_chain(c_k, est)
+            b_mu = None
+            self._spread = own_std * np.sqrt(b / (2.0 - b))     # the fixed filter's stationary std
             if chain is not None:
-                b, _ = noise_gain(*chain, s.modifier_drift, self._width)
+                b, P = noise_gain(*chain, s.modifier_drift, self._width)
+                self._spread = np.sqrt(P)
                 notes.append(f"modifiers filtered by noise (gain {np.round(b, 3).tolist()})")
+                b_mu = self._constraint_gains(chain, nominal)
+                if b_mu is not None:
+                    notes.append(f"constraint modifiers filtered by their own noise (gain "
+                                 f"{np.round(b_mu, 3).tolist()})")
             else:
                 notes.append(f"modifiers filtered (b = {b:g})")
             lam = (1.0 - b) * prev.lam + b * lam
-            mu = (1.0 - b) * prev.mu.reshape(mu.shape) + b * mu
+            b_mu = b if b_mu is None else b_mu
+            mu = (1.0 - b_mu) * prev.mu.reshape(mu.shape) + b_mu * mu
         return Modifiers(c_k, eps, lam, mu, self._backoff.copy())
+
+    def _constraint_gains(self, chain, nominal: PlantPoint) -> np.ndarray | None:
+        """(n_g, n_c) the gains of ``mu`` with ``GMASettings.constraint_drift``: :func:`noise_gain` over the
+        cost's chain with each constraint's own standard deviations (the gradient's ``cost_std`` rescaled by the
+        constraint's measured standard deviation over the cost's, per iteration) and drift bound; ``None`` when
+        the setting is off or some iteration of the chain lacks those standard deviations."""
+        s, pr = self.settings, self.problem
+        if s.constraint_drift is None or not pr.n_g:
+            return None
+        points, cost_stds = chain
+        results = {q.request_id: r for q, r in self.history.experiments}
+        recs = self.history.iterations[len(self.history.iterations) - (len(points) - 1):] if len(points) > 1 else []
+        nominals = [results.get(r.experiment_ids[0]) if r.experiment_ids else None for r in recs] + [nominal]
+        ratios = []
+        for pt in nominals:
+            if pt is None or not pt.cost_std or pt.constraints_std is None:
+                return None
+            ratios.append(np.asarray(pt.constraints_std, float).reshape(pr.n_g) / pt.cost_std)
+        drift = per_setpoint("constraint_drift", s.constraint_drift, pr.n_g)
+        gains = [noise_gain(points, [sd * r[j] for sd, r in zip(cost_stds, ratios)], drift[j], self._width)[0]
+                 for j in range(pr.n_g)]
+        return np.array(gains).reshape(pr.n_g, pr.n_c)
 
     def _noise_chain(self, c_k, est: GradientEstimate):
         """``(points, stds)`` of the noise-matched modifier filter (:mod:`~kite_rto.gma.noise_filter`): the
@@ -592,8 +625,12 @@ class GMA:
             return replace(hold, decision=Decision.HOLD_BAD_GRADIENT)
         if pr.n_g and s.backoff_std_factor > 0 and nominal.constraints_std is not None:
             mods = replace(mods, backoff=mods.backoff + s.backoff_std_factor * nominal.constraints_std)
+        spread = None
+        if s.cost_sigma > 0:
+            spread = s.cost_sigma * np.nan_to_num(self._spread, nan=0.0, posinf=0.0)
+            notes.append(f"pessimistic cost: {s.cost_sigma:g} x sigma {np.round(self._spread, 4).tolist()}")
         res = self.modified_nlp.solve(mods, radius=radius_abs, convexification=self._q,
-                                      penalty=s.constraint_penalty, x0=model.u)
+                                      penalty=s.constraint_penalty, x0=model.u, spread=spread)
         if not res.success:
             self._radius = np.maximum(self._radius * s.trust_shrink, s.trust_radius_min)
             return replace(hold, decision=Decision.HOLD_SOLVE_FAILED, modifiers=mods, cost=res.f, status=res.status)

@@ -68,6 +68,21 @@ class GMASettings:
             Kalman gain from the estimates' standard deviations (pooled over the iterations) and the filtered
             modifier's variance, which grows by ``(q |step / w|)^2`` per step; ``q`` bounds the plant-model
             curvature mismatch, cost units per squared box width. Needs the estimates' ``cost_std`` (without it the fixed filter applies).
+        constraint_drift: ``None`` (default): the constraint-gradient modifiers ``mu`` get the cost's gain. A
+            number ``q_g >= 0`` (scalar or one per constraint) gives each constraint's ``mu`` a gain of its own
+            from the same filter, fed with that constraint's noise (the gradient's standard deviation times the
+            constraint's measured standard deviation over the cost's: same experiments, same design) and drift
+            bound ``q_g``, constraint units per squared box width. A constraint measured more precisely than the
+            cost then follows its measurements, so the modified problem and the safe step predict it alike.
+            Needs ``modifier_drift``.
+        cost_sigma: ``z >= 0``, a pessimistic modified cost: ``z |sigma * d|`` is added to it, ``d`` the step in
+            setpoints and ``sigma`` the standard deviation of the filtered cost-gradient modifier per setpoint
+            (``sqrt(P)`` of the noise-matched filter; the estimate's own ``cost_std`` without that filter,
+            scaled by ``sqrt(b / (2 - b))`` for a fixed filter ``b``). The step then goes only where the
+            modified gradient exceeds ``z`` of its standard deviations, and no further than the model's
+            curvature allows against that margin: at a converged point noise no longer moves the iterate,
+            and as the filter averages more iterations ``sigma`` falls and a real gradient gets through.
+            0 (default) = off; needs the estimates' ``cost_std`` (a component without one gets ``sigma = 0``).
         trust_radius: initial trust-region half-width of the box ``|y(u) - c_k| <= Delta`` imposed in the
             modified problem, relative to the setpoint box width; ``> 0``, ``inf`` disables the trust region.
         trust_adapt: adapt the trust radius per setpoint: shrink it by ``trust_shrink`` when the step in that
@@ -139,6 +154,9 @@ class GMASettings:
             (model plus the filtered ``mu``, the one the step was chosen with) instead of this iteration's raw
             estimate; with a modifier filter the two differ, and the raw one can veto every step the filtered one
             proposes. Off by default.
+        safe_shrink: shrink the trust radius (by ``trust_shrink``) whenever a safe step shortens the filtered
+            step (True, default); False leaves the radius to ``trust_adapt``: the safe step already limits that
+            step, and shrinking as well compounds, over iterations, to the smallest radius.
         safe_adapt_min_step: steps shorter than this (largest component, box widths) do not update ``M``
             (their gradient error over the step would look like curvature), ``>= 0``.
         noise_ratio: effort matched to noise (issue #14 item 4, :mod:`~kite_rto.gma.effort`): the nominal and
@@ -154,6 +172,8 @@ class GMASettings:
     filter_gain: Scalar = 0.5
     modifier_filter: float = 1.0
     modifier_drift: float | None = None
+    constraint_drift: Scalar | None = None
+    cost_sigma: float = 0.0
     trust_radius: Scalar = 0.25
     trust_adapt: bool = True
     trust_shrink: float = 0.5
@@ -181,6 +201,7 @@ class GMASettings:
     safe_sigma: float = 2.0
     safe_tolerance: Scalar = 0.0
     safe_adapt_min_step: float = 0.01
+    safe_shrink: bool = True
     safe_filtered: bool = False
     noise_ratio: float = 0.5
     max_repeats_noise: int = 0
@@ -192,6 +213,12 @@ class GMASettings:
         _check("modifier_filter", self.modifier_filter, 0.0, 1.0, low_open=True)
         if self.modifier_drift is not None:
             _check("modifier_drift", self.modifier_drift, 0.0, None)
+        if self.constraint_drift is not None:
+            _check("constraint_drift", self.constraint_drift, 0.0, None)
+            if self.modifier_drift is None:
+                raise ValueError(f"GMASettings.constraint_drift={self.constraint_drift!r} needs modifier_drift "
+                                 "(the noise-matched filter); modifier_drift is None")
+        _check("cost_sigma", self.cost_sigma, 0.0, None)
         _check("trust_radius", self.trust_radius, 0.0, None, low_open=True, inf_ok=True)
         _check_bool("trust_adapt", self.trust_adapt)
         _check("trust_shrink", self.trust_shrink, 0.0, 1.0, low_open=True, high_open=True)
@@ -230,6 +257,7 @@ class GMASettings:
         _check("safe_tolerance", self.safe_tolerance, 0.0, None)
         _check("safe_adapt_min_step", self.safe_adapt_min_step, 0.0, None)
         _check_bool("safe_filtered", self.safe_filtered)
+        _check_bool("safe_shrink", self.safe_shrink)
         _check("noise_ratio", self.noise_ratio, 0.0, None, low_open=True)
         if isinstance(self.max_repeats_noise, bool) or not isinstance(self.max_repeats_noise, int) \
                 or self.max_repeats_noise < 0:
