@@ -75,3 +75,15 @@ def test_a_real_mismatch_still_gets_through(seed):
 def test_bad_cost_sigma_is_named():
     with pytest.raises(ValueError, match="cost_sigma=-1.0"):
         GMASettings(cost_sigma=-1.0)
+
+
+def test_cost_sigma_after_keeps_the_first_step():
+    """With cost_sigma_after = 1 iteration 0 is solved without the pessimistic cost (same step as without it)
+    and every later one with it."""
+    plain = run(0, (1.5, 0.6), n_iter=3)
+    late = run(0, (1.5, 0.6), n_iter=3, cost_sigma=2.0, cost_sigma_after=1)
+    np.testing.assert_allclose(late[0].c_next, plain[0].c_next, atol=1e-6)
+    assert not any(n.startswith("pessimistic cost") for n in late[0].notes)
+    assert all(any(n.startswith("pessimistic cost: 2 x sigma") for n in r.notes) for r in late[1:])
+    with pytest.raises(ValueError, match="cost_sigma_after=-1: expected an integer >= 0"):
+        GMASettings(cost_sigma_after=-1)

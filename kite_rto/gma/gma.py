@@ -626,7 +626,7 @@ class GMA:
         if pr.n_g and s.backoff_std_factor > 0 and nominal.constraints_std is not None:
             mods = replace(mods, backoff=mods.backoff + s.backoff_std_factor * nominal.constraints_std)
         spread = None
-        if s.cost_sigma > 0:
+        if s.cost_sigma > 0 and self._k >= s.cost_sigma_after:
             spread = s.cost_sigma * np.nan_to_num(self._spread, nan=0.0, posinf=0.0)
             notes.append(f"pessimistic cost: {s.cost_sigma:g} x sigma {np.round(self._spread, 4).tolist()}")
         res = self.modified_nlp.solve(mods, radius=radius_abs, convexification=self._q,

@@ -42,6 +42,12 @@ def _check_bool(name: str, value) -> None:
         raise ValueError(f"GMASettings.{name}={value!r}: expected True or False")
 
 
+def _check_int(name: str, value, low: int, extra: str = "") -> None:
+    """Raise ``ValueError`` naming the field and value unless ``value`` is an integer ``>= low`` (not a bool)."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < low:
+        raise ValueError(f"GMASettings.{name}={value!r}: expected an integer >= {low}{extra}")
+
+
 def per_setpoint(name: str, value, n: int) -> np.ndarray:
     """Broadcast a scalar-or-sequence setting to shape ``(n,)``; ``ValueError`` on a length mismatch."""
     arr = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
@@ -83,6 +89,9 @@ class GMASettings:
             curvature allows against that margin: at a converged point noise no longer moves the iterate,
             and as the filter averages more iterations ``sigma`` falls and a real gradient gets through.
             0 (default) = off; needs the estimates' ``cost_std`` (a component without one gets ``sigma = 0``).
+        cost_sigma_after: iterations ``k < cost_sigma_after`` solve without the pessimistic cost (integer
+            ``>= 0``; 0 = from the first). 1 keeps the first step, from the model optimum on a single gradient
+            estimate, what it is without it, and makes the pessimism apply once the filter has something to average.
         trust_radius: initial trust-region half-width of the box ``|y(u) - c_k| <= Delta`` imposed in the
             modified problem, relative to the setpoint box width; ``> 0``, ``inf`` disables the trust region.
         trust_adapt: adapt the trust radius per setpoint: shrink it by ``trust_shrink`` when the step in that
@@ -174,6 +183,7 @@ class GMASettings:
     modifier_drift: float | None = None
     constraint_drift: Scalar | None = None
     cost_sigma: float = 0.0
+    cost_sigma_after: int = 0
     trust_radius: Scalar = 0.25
     trust_adapt: bool = True
     trust_shrink: float = 0.5
@@ -239,10 +249,7 @@ class GMASettings:
         _check_bool("model_secant_constraints", self.model_secant_constraints)
         _check("settle_time", self.settle_time, 0.0, None)
         _check("averaging", self.averaging, 0.0, None, low_open=True)
-        if isinstance(self.structure_check_every, bool) or not isinstance(self.structure_check_every, int) \
-                or self.structure_check_every < 0:
-            raise ValueError(f"GMASettings.structure_check_every={self.structure_check_every!r}: expected an "
-                             f"integer >= 0 (0 = off)")
+        _check_int("structure_check_every", self.structure_check_every, 0, " (0 = off)")
         _check("structure_stall", self.structure_stall, 0.0, None)
         _check("structure_step", self.structure_step, 0.0, 1.0, low_open=True)
         _check("structure_sigma", self.structure_sigma, 0.0, None)
@@ -259,13 +266,9 @@ class GMASettings:
         _check_bool("safe_filtered", self.safe_filtered)
         _check_bool("safe_shrink", self.safe_shrink)
         _check("noise_ratio", self.noise_ratio, 0.0, None, low_open=True)
-        if isinstance(self.max_repeats_noise, bool) or not isinstance(self.max_repeats_noise, int) \
-                or self.max_repeats_noise < 0:
-            raise ValueError(f"GMASettings.max_repeats_noise={self.max_repeats_noise!r}: expected an integer "
-                             f">= 0 (0 = off)")
-        if isinstance(self.max_ipopt_iter, bool) or not isinstance(self.max_ipopt_iter, int) \
-                or self.max_ipopt_iter < 1:
-            raise ValueError(f"GMASettings.max_ipopt_iter={self.max_ipopt_iter!r}: expected an integer >= 1")
+        _check_int("max_repeats_noise", self.max_repeats_noise, 0, " (0 = off)")
+        _check_int("max_ipopt_iter", self.max_ipopt_iter, 1)
+        _check_int("cost_sigma_after", self.cost_sigma_after, 0)
         if not isinstance(self.ipopt_options, dict):
             raise ValueError(f"GMASettings.ipopt_options={self.ipopt_options!r}: expected a dict")
         if np.any(np.asarray(self.trust_radius, dtype=float) < self.trust_radius_min):
