@@ -72,7 +72,6 @@ class GMA:
         self._backoff = per_setpoint("backoff", s.backoff, n_g) if n_g else np.zeros(0)
         self.gradient = gradient if gradient is not None else FiniteDifferenceGradient(0.01 * self._width)
         self._nlps = NLPPair(problem, s)
-        self._spread = np.zeros(n_c)      # sigma of the pessimistic cost (cost_sigma), set by _modifiers
         if history is not None:
             self.history = deepcopy(history)
             self._resume()
@@ -355,9 +354,9 @@ class GMA:
         if noise is not None:
             notes.append(noise.describe())
         est, restored = self._check_structure(c_k, nominal, new, struct, model, est, notes)
-        mods = self._modifiers(c_k, nominal, model, est, notes)
+        mods, spread = self._modifiers(c_k, nominal, model, est, notes)
         radius_abs = self._radius * self._width
-        prop = self._propose(mods, nominal, model, est, radius_abs, notes)
+        prop = self._propose(mods, spread, nominal, model, est, radius_abs, notes)
         if s.structure_kkt and struct and prop.nu is not None and self._stalled():
             restored = restored + self._kkt_release(c_k, nominal, struct, prop.nu, restored, notes)
         step = np.clip(self._K * (prop.c_star - c_k), -self._max_step, self._max_step)
@@ -520,9 +519,8 @@ class GMA:
         if est.cost_std is not None and nominal.cost_std:   # same design: the cost's derivative std, rescaled
             slope_std = float(np.abs(step) @ np.asarray(est.cost_std, float)) * g_std / nominal.cost_std
         recs = self.history.iterations
-        results = {q.request_id: r for q, r in self.history.experiments}
-        stds = [getattr(results.get(r.experiment_ids[0] if r.experiment_ids else ""), "constraints_std", None)
-                for r in recs] + [nominal.constraints_std]
+        stds = [getattr(pt, "constraints_std", None) for pt in self._nominal_results(recs)] + [
+            nominal.constraints_std]
         current = SimpleNamespace(c_k=self._c, c_next=self._c, constraints=nominal.constraints,
                                   jac_constraints=est.constraints)
         seen = observed_curvature(list(recs) + [current], stds, w, s.safe_sigma, s.safe_adapt_min_step, n_g)
@@ -544,8 +542,10 @@ class GMA:
         return dc * size / float(np.max(np.abs(dc) / w))
 
     def _modifiers(self, c_k, nominal: PlantPoint, model: ModelRealization, est: GradientEstimate,
-                   notes: list[str]) -> Modifiers:
-        """Plant minus model at ``c_k``; gradient modifiers filtered with ``modifier_filter`` (noted)."""
+                   notes: list[str]) -> tuple:
+        """``(Modifiers, sigma)``: plant minus model at ``c_k``, gradient modifiers filtered with ``modifier_filter``
+        or the noise-matched filter (noted), and the filtered cost modifier's standard deviation per setpoint (n_c,)
+        (``GMASettings.cost_sigma``)."""
         eps = nominal.constraints - model.g
         lam = est.cost - model.grad_phi
         mu = est.constraints - model.jac_g
@@ -554,14 +554,14 @@ class GMA:
         prev = None if b == 1.0 and s.modifier_drift is None else next(
             (r for r in reversed(self.history.iterations) if _finite_modifiers(r)), None)
         own_std = np.zeros(self.problem.n_c) if est.cost_std is None else np.asarray(est.cost_std, float)
-        self._spread = own_std
+        spread = own_std
         if prev is not None and np.all(np.isfinite(lam)) and np.all(np.isfinite(mu)):
             chain = self._noise_chain(c_k, est)
             b_mu = None
-            self._spread = own_std * np.sqrt(b / (2.0 - b))     # the fixed filter's stationary std
+            spread = own_std * np.sqrt(b / (2.0 - b))     # the fixed filter's stationary std
             if chain is not None:
                 b, P = noise_gain(*chain, s.modifier_drift, self._width)
-                self._spread = np.sqrt(P)
+                spread = np.sqrt(P)
                 notes.append(f"modifiers filtered by noise (gain {np.round(b, 3).tolist()})")
                 b_mu = self._constraint_gains(chain, nominal)
                 if b_mu is not None:
@@ -572,7 +572,12 @@ class GMA:
             lam = (1.0 - b) * prev.lam + b * lam
             b_mu = b if b_mu is None else b_mu
             mu = (1.0 - b_mu) * prev.mu.reshape(mu.shape) + b_mu * mu
-        return Modifiers(c_k, eps, lam, mu, self._backoff.copy())
+        return Modifiers(c_k, eps, lam, mu, self._backoff.copy()), spread
+
+    def _nominal_results(self, records) -> list:
+        """The nominal :class:`ExperimentResult` of each of ``records`` (``None`` where it has none)."""
+        results = {q.request_id: r for q, r in self.history.experiments}
+        return [results.get(r.experiment_ids[0]) if r.experiment_ids else None for r in records]
 
     def _constraint_gains(self, chain, nominal: PlantPoint) -> np.ndarray | None:
         """(n_g, n_c) the gains of ``mu`` with ``GMASettings.constraint_drift``: :func:`noise_gain` over the
@@ -583,9 +588,8 @@ class GMA:
         if s.constraint_drift is None or not pr.n_g:
             return None
         points, cost_stds = chain
-        results = {q.request_id: r for q, r in self.history.experiments}
-        recs = self.history.iterations[len(self.history.iterations) - (len(points) - 1):] if len(points) > 1 else []
-        nominals = [results.get(r.experiment_ids[0]) if r.experiment_ids else None for r in recs] + [nominal]
+        recs = self.history.iterations[len(self.history.iterations) - (len(points) - 1):]
+        nominals = self._nominal_results(recs) + [nominal]
         ratios = []
         for pt in nominals:
             if pt is None or not pt.cost_std or pt.constraints_std is None:
@@ -610,9 +614,10 @@ class GMA:
             stds.insert(0, np.asarray(r.grad_cost_std, float))
         return points, stds
 
-    def _propose(self, mods: Modifiers, nominal: PlantPoint, model: ModelRealization, est: GradientEstimate,
-                 radius_abs: np.ndarray, notes: list[str]) -> _Proposal:
-        """Solve the modified problem at ``mods.c`` inside the trust region, or say why GMA holds.
+    def _propose(self, mods: Modifiers, spread: np.ndarray, nominal: PlantPoint, model: ModelRealization,
+                 est: GradientEstimate, radius_abs: np.ndarray, notes: list[str]) -> _Proposal:
+        """Solve the modified problem at ``mods.c`` inside the trust region, or say why GMA holds; ``spread`` is
+        the filtered cost modifier's standard deviation (n_c,) of the pessimistic cost.
 
         A failed solve shrinks the trust radius; a solved one becomes the next consistent model point."""
         pr, s, c_k = self.problem, self.settings, mods.c
@@ -625,12 +630,12 @@ class GMA:
             return replace(hold, decision=Decision.HOLD_BAD_GRADIENT)
         if pr.n_g and s.backoff_std_factor > 0 and nominal.constraints_std is not None:
             mods = replace(mods, backoff=mods.backoff + s.backoff_std_factor * nominal.constraints_std)
-        spread = None
+        pessimism = None
         if s.cost_sigma > 0 and self._k >= s.cost_sigma_after:
-            spread = s.cost_sigma * np.nan_to_num(self._spread, nan=0.0, posinf=0.0)
-            notes.append(f"pessimistic cost: {s.cost_sigma:g} x sigma {np.round(self._spread, 4).tolist()}")
+            pessimism = s.cost_sigma * np.nan_to_num(spread, nan=0.0, posinf=0.0)
+            notes.append(f"pessimistic cost: {s.cost_sigma:g} x sigma {np.round(spread, 4).tolist()}")
         res = self.modified_nlp.solve(mods, radius=radius_abs, convexification=self._q,
-                                      penalty=s.constraint_penalty, x0=model.u, spread=spread)
+                                      penalty=s.constraint_penalty, x0=model.u, spread=pessimism)
         if not res.success:
             self._radius = np.maximum(self._radius * s.trust_shrink, s.trust_radius_min)
             return replace(hold, decision=Decision.HOLD_SOLVE_FAILED, modifiers=mods, cost=res.f, status=res.status)
