@@ -29,7 +29,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ._nlp import RealizationNLP
-from .gradients import GradientEstimate, GradientEstimator, PlantPoint, _positive
+from .gradients import GradientEstimate, GradientEstimator, PlantPoint, _alternate_flag, _positive, _preferred_sign
 from .problem import ModelProblem
 from .settings import GMASettings
 
@@ -60,7 +60,7 @@ class DirectionalGradient(GradientEstimator):
     uses_model = True
 
     def __init__(self, directions, step: float = 0.5, reuse: bool = True, radius=None,
-                 window: int | None = None, rcond_min: float = 0.2):
+                 window: int | None = None, rcond_min: float = 0.2, alternate: bool = False):
         U = np.asarray(directions, dtype=float)
         if U.ndim == 1:
             U = U[:, None]
@@ -91,6 +91,7 @@ class DirectionalGradient(GradientEstimator):
         if not 0.0 < rcond_min <= 1.0:
             raise ValueError(f"DirectionalGradient.rcond_min={rcond_min!r}: expected a value in (0, 1]")
         self.rcond_min = float(rcond_min)
+        self.alternate = _alternate_flag("DirectionalGradient", alternate)
 
     @property
     def n_directions(self) -> int:
@@ -103,7 +104,7 @@ class DirectionalGradient(GradientEstimator):
         extra = np.asarray(extra, dtype=float).reshape(self.U.shape[0], -1)
         window = None if self.window == 2 * self.n_directions else self.window
         return DirectionalGradient(np.column_stack([self.U, extra]), self.step, self.reuse, self._radius_arg,
-                                   window, self.rcond_min)
+                                   window, self.rcond_min, self.alternate)
 
     def coordinates(self, dc) -> np.ndarray:
         """Direction-basis coordinates ``z = U^+ dc`` of setpoint displacements ``dc`` (n_c,) or (m, n_c)."""
@@ -128,14 +129,22 @@ class DirectionalGradient(GradientEstimator):
         return chosen, self._rcond(z)
 
     def plan(self, c_k, lb, ub, past=()):
+        return self._plan(c_k, lb, ub, past, 1.0)
+
+    def plan_iteration(self, c_k, lb, ub, past, iteration):
+        return self._plan(c_k, lb, ub, past, _preferred_sign(self.alternate, iteration))
+
+    def _plan(self, c_k, lb, ub, past, prefer: float):
         c_k = np.asarray(c_k, float)
         if self.reuse and self._select(c_k, past)[1] >= self.rcond_min:
             return []
         points = []
-        for d in self.U.T:   # the sign whose step, clipped to the box, keeps most of the direction
-            cands = [np.clip(c_k + sign * self.step * d, lb, ub) for sign in (1.0, -1.0)]
+        for d in self.U.T:   # the sign whose step, clipped to the box, keeps most of the direction (prefer first)
+            cands = [np.clip(c_k + sign * self.step * d, lb, ub) for sign in (prefer, -prefer)]
             kept = [abs(float(self.coordinates(c - c_k) @ self.coordinates(self.step * d))) for c in cands]
-            points.append(cands[int(np.argmax(kept))])
+            # the other sign only when it keeps more than rounding does (both full steps inside the box differ
+            # by ~1e-16, and argmax would pick a side at random)
+            points.append(cands[1] if kept[1] > kept[0] * (1.0 + 1e-9) else cands[0])
         return points
 
     def estimate(self, c_k, nominal: PlantPoint, new: Sequence[PlantPoint], past=(), model=None):

@@ -85,6 +85,24 @@ class GradientEstimator(ABC):
             return self.estimate(c_k, nominal, new, past, model=model)
         return self.estimate(c_k, nominal, new, past)
 
+    def plan_iteration(self, c_k: np.ndarray, lb: np.ndarray, ub: np.ndarray, past: Sequence[PlantPoint],
+                       iteration: int) -> list[np.ndarray]:
+        """:meth:`plan` for GMA's iteration ``iteration`` (>= 0), which is how :class:`~kite_rto.gma.GMA` asks.
+        A strategy whose perturbations depend on the iteration (``alternate``: the one-sided steps change side
+        from one iteration to the next) overrides it; the others plan as :meth:`plan`."""
+        return self.plan(c_k, lb, ub, past)
+
+
+def _alternate_flag(owner: str, value) -> bool:
+    if not isinstance(value, bool):
+        raise ValueError(f"{owner}.alternate={value!r}: expected True or False")
+    return value
+
+
+def _preferred_sign(alternate: bool, iteration: int) -> float:
+    """+1 (the step forward) unless ``alternate`` and ``iteration`` is odd."""
+    return -1.0 if alternate and iteration % 2 else 1.0
+
 
 def _positive(name: str, value) -> np.ndarray:
     arr = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
@@ -99,16 +117,21 @@ class FiniteDifferenceGradient(GradientEstimator):
     Args:
         step: step ``h`` per setpoint, absolute setpoint units, scalar or shape (n_c,), ``> 0``.
         scheme: ``"forward"`` (error ``O(h)``) or ``"central"`` (error ``O(h^2)``, twice the experiments).
+        alternate: forward scheme only: step backwards in GMA's odd iterations (:meth:`plan_iteration`), so that
+            a filter averaging the gradients of an iterate that stays put averages a forward and a backward
+            quotient, whose ``h f''/2`` truncation errors cancel (a central difference spread over two
+            iterations, at no extra experiment).
 
-    Perturbed setpoints are clipped to the setpoint box; a forward step that would leave the box is taken
-    backwards instead. The differences always use the setpoints actually requested.
+    Perturbed setpoints are clipped to the setpoint box; a step that would leave the box is taken the other
+    way instead. The differences always use the setpoints actually requested.
     """
 
-    def __init__(self, step, scheme: str = "forward"):
+    def __init__(self, step, scheme: str = "forward", alternate: bool = False):
         self.step = _positive("FiniteDifferenceGradient.step", step)
         if scheme not in ("forward", "central"):
             raise ValueError(f"FiniteDifferenceGradient.scheme={scheme!r}: expected 'forward' or 'central'")
         self.scheme = scheme
+        self.alternate = _alternate_flag("FiniteDifferenceGradient", alternate)
 
     @classmethod
     def from_noise(cls, noise_std: float, curvature, scheme: str = "forward",
@@ -140,10 +163,17 @@ class FiniteDifferenceGradient(GradientEstimator):
         return self.step
 
     def plan(self, c_k, lb, ub, past=()):
+        return self._plan(c_k, lb, ub, 1.0)
+
+    def plan_iteration(self, c_k, lb, ub, past, iteration):
+        return self._plan(c_k, lb, ub, _preferred_sign(self.alternate, iteration))
+
+    def _plan(self, c_k, lb, ub, prefer: float):
         c_k = np.asarray(c_k, float)
         points = []
         for i, h in enumerate(self._steps(c_k.size)):
-            signs = (1.0, -1.0) if self.scheme == "central" else (1.0 if c_k[i] + h <= ub[i] else -1.0,)
+            inside = lb[i] <= c_k[i] + prefer * h <= ub[i]
+            signs = (1.0, -1.0) if self.scheme == "central" else (prefer if inside else -prefer,)
             for s in signs:
                 c = c_k.copy()
                 c[i] = np.clip(c_k[i] + s * h, lb[i], ub[i])
@@ -223,6 +253,11 @@ class LeastSquaresGradient(GradientEstimator):
         c_k = np.asarray(c_k, float)
         _, rcond = self._select(c_k, past)
         return [] if rcond >= self.rcond_min else self.fallback.plan(c_k, lb, ub, past)
+
+    def plan_iteration(self, c_k, lb, ub, past, iteration):
+        c_k = np.asarray(c_k, float)
+        _, rcond = self._select(c_k, past)
+        return [] if rcond >= self.rcond_min else self.fallback.plan_iteration(c_k, lb, ub, past, iteration)
 
     def estimate(self, c_k, nominal, new, past=()):
         c_k = np.asarray(c_k, float)

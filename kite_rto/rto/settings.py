@@ -54,6 +54,8 @@ class KiteRTOSettings:
             coordinate, or ``"least_squares"`` over past points with forward differences as fallback.
         fd_step: finite-difference step per shape coordinate, relative to the box width, in (0, 1]; for
             ``"directional"`` the first value is the step along each privileged direction (box widths).
+        fd_alternate: perturb backwards in odd iterations (``alternate`` of the directional and forward
+            strategies), so that the modifier filter averages forward and backward quotients.
         n_directions: privileged directions of ``"directional"`` (1 to 3; at most the coordinates not held at a
             robustly active bound, none under the default prior).
         uncertainty: the model-parameter deviations that define the privileged directions.
@@ -69,6 +71,7 @@ class KiteRTOSettings:
     box: ShapeBox = field(default_factory=ShapeBox)
     gradient: str = "directional"
     fd_step: tuple = (0.5, 0.5, 0.5)
+    fd_alternate: bool = False
     n_directions: int = 3
     uncertainty: ModelUncertainty = field(default_factory=ModelUncertainty)
     gma: GMASettings = field(default_factory=default_gma_settings)
@@ -82,6 +85,8 @@ class KiteRTOSettings:
         steps = np.atleast_1d(np.asarray(self.fd_step, dtype=float))
         if steps.size not in (1, 3) or not np.all((steps > 0) & (steps <= 1)):
             raise ValueError(f"{n}.fd_step = {self.fd_step!r}: expected 1 or 3 values in (0, 1]")
+        if not isinstance(self.fd_alternate, bool):
+            raise ValueError(f"{n}.fd_alternate = {self.fd_alternate!r}: expected True or False")
         if not isinstance(self.gma, GMASettings):
             raise ValueError(f"{n}.gma = {self.gma!r}: expected a GMASettings")
         if isinstance(self.n_directions, bool) or self.n_directions not in (1, 2, 3):
@@ -112,7 +117,10 @@ class KiteRTOSettings:
         if self.gradient == "directional":
             if directions is None:
                 raise ValueError("KiteRTOSettings.gradient_estimator: 'directional' needs the privileged directions")
-            return DirectionalGradient(directions, step=float(np.ravel(self.fd_step)[0]), reuse=False)
+            return DirectionalGradient(directions, step=float(np.ravel(self.fd_step)[0]), reuse=False,
+                                       alternate=self.fd_alternate)
+        alternate = self.fd_alternate and self.gradient != "central"
         if self.gradient == "least_squares":
-            return LeastSquaresGradient(FiniteDifferenceGradient(steps), radius=2.0 * steps, window=8)
-        return FiniteDifferenceGradient(steps, self.gradient)
+            return LeastSquaresGradient(FiniteDifferenceGradient(steps, alternate=alternate), radius=2.0 * steps,
+                                        window=8)
+        return FiniteDifferenceGradient(steps, self.gradient, alternate)
