@@ -129,13 +129,10 @@ class DirectionalGradient(GradientEstimator):
         return chosen, self._rcond(z)
 
     def plan(self, c_k, lb, ub, past=()):
-        return self._plan(c_k, lb, ub, past, 1.0)
+        return self.plan_iteration(c_k, lb, ub, past, 0)
 
     def plan_iteration(self, c_k, lb, ub, past, iteration):
-        return self._plan(c_k, lb, ub, past, _preferred_sign(self.alternate, iteration))
-
-    def _plan(self, c_k, lb, ub, past, prefer: float):
-        c_k = np.asarray(c_k, float)
+        c_k, prefer = np.asarray(c_k, float), _preferred_sign(self.alternate, iteration)
         if self.reuse and self._select(c_k, past)[1] >= self.rcond_min:
             return []
         points = []

@@ -163,13 +163,10 @@ class FiniteDifferenceGradient(GradientEstimator):
         return self.step
 
     def plan(self, c_k, lb, ub, past=()):
-        return self._plan(c_k, lb, ub, 1.0)
+        return self.plan_iteration(c_k, lb, ub, past, 0)
 
     def plan_iteration(self, c_k, lb, ub, past, iteration):
-        return self._plan(c_k, lb, ub, _preferred_sign(self.alternate, iteration))
-
-    def _plan(self, c_k, lb, ub, prefer: float):
-        c_k = np.asarray(c_k, float)
+        c_k, prefer = np.asarray(c_k, float), _preferred_sign(self.alternate, iteration)
         points = []
         for i, h in enumerate(self._steps(c_k.size)):
             inside = lb[i] <= c_k[i] + prefer * h <= ub[i]
@@ -250,9 +247,7 @@ class LeastSquaresGradient(GradientEstimator):
         return chosen, float(s[-1] / s[0]) if s[0] > 0 else 0.0
 
     def plan(self, c_k, lb, ub, past=()):
-        c_k = np.asarray(c_k, float)
-        _, rcond = self._select(c_k, past)
-        return [] if rcond >= self.rcond_min else self.fallback.plan(c_k, lb, ub, past)
+        return self.plan_iteration(c_k, lb, ub, past, 0)
 
     def plan_iteration(self, c_k, lb, ub, past, iteration):
         c_k = np.asarray(c_k, float)
