@@ -15,7 +15,6 @@ import numpy as np
 from ..kite.params import KiteParams
 from ..rto.baselines import bayes_opt_plant, finite_difference_ascent, model_only, nelder_mead_plant
 from ..rto.builder import model_only_optimum
-from ..rto.ocp import KiteOCPSettings
 from ..rto.runner import run_rto
 from ..rto.settings import KiteRTOSettings
 from .scenarios import Scenario
@@ -60,8 +59,7 @@ def start_point(settings: KiteRTOSettings) -> np.ndarray:
     experiment's h_min (as :func:`~kite_rto.rto.builder.make_gma` starts)."""
     if settings.c0 is not None:
         return np.asarray(settings.c0, dtype=float)
-    ocp = KiteOCPSettings(h_min=settings.experiment.h_min)
-    return model_only_optimum(settings.box, KiteParams(), ocp).c
+    return model_only_optimum(settings.box, KiteParams(), settings.ocp_settings()).c
 
 
 def fly_gma(scenario: Scenario, seed: int, n_iter: int, settings: KiteRTOSettings) -> Flown:

@@ -46,7 +46,6 @@ from ..gma import GMA
 from ..gma.store_fault import DiskFull
 from ..kite.params import KiteParams, ParameterError
 from ..rto.builder import gma_directions, lap_problem, make_gma, model_only_optimum
-from ..rto.ocp import KiteOCPSettings
 from ..gma import StoreError
 from ..rto.operator_log import transition_event, was_paused
 from ..rto.optimizer_run import OptimizerRun
@@ -225,7 +224,7 @@ class OptimizerNode(LifecycleNode):
         GMA's NLPs."""
         try:
             s = self.settings
-            ocp = KiteOCPSettings(h_min=s.experiment.h_min)
+            ocp = s.ocp_settings()
             for what, step in (("building the lap OCP", lambda: lap_problem(s.box, KiteParams(), ocp)),
                                ("solving for the model's optimum", lambda: model_only_optimum(s.box, KiteParams(), ocp)),
                                ("computing the privileged directions", lambda: s.gradient != "directional" or

@@ -8,6 +8,7 @@ from dataclasses import replace
 from ..flight.path import SetpointError, validate_setpoints
 from ..flight.shape import ShapeBox, setpoints_from_shape
 from ..kite.params import KiteParams, ParameterError
+from ..rto.ocp import ALTITUDES
 from ..rto.settings import KiteRTOSettings
 from ..rto.wind_source import WIND_SOURCES
 from .parameters import ParamSpec
@@ -58,6 +59,10 @@ PARAMS = (
     ParamSpec("model_secant", _S.gma.model_secant, "GMA gradient modifiers from the model's own difference "
               "quotients over the flown points (cancels the finite differences' truncation error up to the "
               "plant-model curvature mismatch; false: plant quotient minus the model's gradient)"),
+    ParamSpec("altitude_constraint", _S.altitude, "what the model's altitude constraint bounds: the lowest point "
+              "of the reference figure-eight of the lap's setpoints (reference: a function of the setpoints alone, "
+              "the path controller's tracking error left to GMA's modifiers) or of the model's own free lap (lap)",
+              choices=ALTITUDES),
     ParamSpec("trust_radius", _S.gma.trust_radius, "initial trust radius (not below GMA's minimum trust radius)",
               _S.gma.trust_radius_min, 10.0, unit="fraction of the box width"),
     ParamSpec("box_theta_0_deg", [round(math.degrees(v), 9) for v in _S.box.theta_0], "optimizer's theta_0 range [low, high]",
@@ -116,8 +121,8 @@ def settings_from_params(v: dict) -> KiteRTOSettings:
                        max_duration=v["max_duration"], normalize=v["normalize"], wind_source=v["wind_source"],
                        h_min=v["h_min"])
         return replace(_S, experiment=spec, box=_shape_box(v), gradient=v["gradient"],
-                       n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3
-                       ).with_gma(filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
+                       n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3,
+                       altitude=v["altitude_constraint"]).with_gma(filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
                                   modifier_drift=None if v["modifier_drift"] < 0 else v["modifier_drift"],
                                   model_secant=v["model_secant"], trust_radius=v["trust_radius"])
     except ValueError as err:

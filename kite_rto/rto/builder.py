@@ -104,7 +104,7 @@ def make_gma(settings: KiteRTOSettings | None = None, model_params: KiteParams |
     """
     settings = settings or KiteRTOSettings()
     model_params = model_params or KiteParams()
-    ocp = ocp or KiteOCPSettings(h_min=settings.experiment.h_min)
+    ocp = ocp or settings.ocp_settings()
     if abs(ocp.h_min - settings.experiment.h_min) > 1e-9:
         raise ValueError(f"make_gma: KiteOCPSettings.h_min = {ocp.h_min!r} differs from "
                          f"ExperimentSpec.h_min = {settings.experiment.h_min!r}")

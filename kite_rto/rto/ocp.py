@@ -43,10 +43,13 @@ from ..flight.projection import project_samples
 
 from ..gma import ModelProblem
 
-__all__ = ["KiteOCPSettings", "KiteModelProblem", "model_problem", "path_guess", "unpack",
+__all__ = ["KiteOCPSettings", "KiteModelProblem", "model_problem", "path_guess", "unpack", "reference_altitudes",
+           "ALTITUDES",
            "DEFAULT_C_LB", "DEFAULT_C_UB", "DEFAULT_C_GUESS"]
 
 _DEG = math.pi / 180.0
+ALTITUDES = ("lap", "reference")
+"""What the OCP's altitude constraint bounds (:attr:`KiteOCPSettings.altitude`)."""
 DEFAULT_C_LB = np.array([15.0, 8.0, 1.0]) * _DEG
 """Default safe setpoint box, lower corner (theta_0, A_phi, A_theta), rad."""
 DEFAULT_C_UB = np.array([45.0, 50.0, 12.0]) * _DEG
@@ -74,6 +77,12 @@ class KiteOCPSettings:
         delta_rate_weight: w, cost units per unit^2; adds ``w sum_k (delta_{k+1} - delta_k)^2`` (cyclic) to
             the cost, which suppresses chattering of the piecewise-constant steering (0 disables it). At 0.3
             it costs < 0.1 % of the mean tension at the optimum and makes warm starts converge in a few steps.
+        altitude: what the altitude constraint bounds. ``"lap"``: the soft minimum of the model lap's node
+            altitudes. ``"reference"``: the soft minimum of the altitude of the reference figure-eight of the
+            lap's setpoints ``y(u)`` (:func:`reference_altitudes`), a function of ``y(u)`` alone: the model can
+            then not keep the altitude by bending its lap in ways the plant's path controller does not fly, and
+            the controller's tracking error is plant-model mismatch for GMA's modifiers (``docs/theory.md``).
+        reference_samples: samples of the reference figure-eight per lap for ``altitude = "reference"``, >= 16.
     """
 
     n_intervals: int = 40
@@ -88,9 +97,16 @@ class KiteOCPSettings:
     constraint_unit: float = 1.0
     softmin_sharpness: float = 0.5
     delta_rate_weight: float = 0.3
+    altitude: str = "lap"
+    reference_samples: int = 64
 
     def __post_init__(self):
         name = type(self).__name__
+        if self.altitude not in ALTITUDES:
+            raise ValueError(f"{name}.altitude = {self.altitude!r}: expected one of {ALTITUDES}")
+        if isinstance(self.reference_samples, bool) or not isinstance(self.reference_samples, int) \
+                or self.reference_samples < 16:
+            raise ValueError(f"{name}.reference_samples = {self.reference_samples!r}: expected an int >= 16")
         if not isinstance(self.n_intervals, int) or self.n_intervals < 8:
             raise ValueError(f"{name}.n_intervals = {self.n_intervals!r}: expected an int >= 8")
         if not isinstance(self.substeps, int) or self.substeps < 1:
@@ -156,6 +172,18 @@ def _softmin(z, h_ref: float, s: float):
     return h_ref - s * ca.log(ca.sum1(ca.exp(-(z - h_ref) / s)))
 
 
+def reference_altitudes(c, r: float, n: int):
+    """Altitudes (m) ``z(s) = r sin(theta_0 + A_theta sin 2s) cos(A_phi sin s)`` of the reference figure-eight of
+    setpoints ``c = (theta_0, A_phi, A_theta)`` (rad) at ``n`` points ``s = 2 pi i / n``; ``c`` numeric (returns a
+    NumPy array (n,)) or a CasADi 3-vector (returns an (n, 1) expression). ``r``: tether length, m."""
+    s = 2 * np.pi * np.arange(n) / n
+    if isinstance(c, (ca.SX, ca.MX)):
+        theta = c[0] + c[2] * ca.DM(np.sin(2 * s))
+        return r * ca.sin(theta) * ca.cos(c[1] * ca.DM(np.sin(s)))
+    th0, a_phi, a_th = (float(v) for v in np.asarray(c, dtype=float).ravel())
+    return r * np.sin(th0 + a_th * np.sin(2 * s)) * np.cos(a_phi * np.sin(s))
+
+
 def model_problem(params: KiteParams | None = None, settings: KiteOCPSettings | None = None,
                        c_lb=None, c_ub=None, c_guess=None, name: str = "kite_lap",
                        shape: bool = False) -> KiteModelProblem:
@@ -191,14 +219,17 @@ def model_problem(params: KiteParams | None = None, settings: KiteOCPSettings | 
     mean_tension = ca.sum2(q) / period                                        # N
     theta, phi = X[0, :].T, X[1, :].T
     z = params.r * ca.sin(theta) * ca.cos(phi)
-    z_soft = _softmin(z, settings.h_min, settings.softmin_sharpness)
+    setpoints = project_samples(theta, phi)
+    z_bound = z if settings.altitude == "lap" else reference_altitudes(setpoints, params.r,
+                                                                       settings.reference_samples)
+    z_soft = _softmin(z_bound, settings.h_min, settings.softmin_sharpness)
 
     lbu, ubu = _bounds(settings)
     return KiteModelProblem(
         u=u, cost=-mean_tension / settings.cost_unit + settings.delta_rate_weight * ca.sumsqr(
             delta - ca.vertcat(delta[1:], delta[0])),
         constraints=(settings.h_min - z_soft) / settings.constraint_unit,
-        outputs=shape_from_setpoints(project_samples(theta, phi)) if shape else project_samples(theta, phi),
+        outputs=shape_from_setpoints(setpoints) if shape else setpoints,
         lbu=lbu, ubu=ubu, c_lb=c_lb, c_ub=c_ub,
         u0=path_guess(params, settings, setpoints_from_shape(c_guess) if shape else c_guess),
         equalities=equalities, inner_constraints=None, name=name, params=params, settings=settings,

@@ -25,6 +25,7 @@ from ..gma import DirectionalGradient, FiniteDifferenceGradient, GMASettings, Le
 from ..flight.shape import ShapeBox
 from .directions import ModelUncertainty
 from .experiment import ExperimentSpec
+from .ocp import ALTITUDES, KiteOCPSettings
 
 __all__ = ["KiteRTOSettings", "GRADIENTS", "default_gma_settings"]
 
@@ -62,6 +63,9 @@ class KiteRTOSettings:
         gma: GMA's :class:`~kite_rto.gma.GMASettings` (filter gain, modifier filter, trust radius and its
             minimum, relative to the box width, back-off in m, ...; default :func:`default_gma_settings`). Its
             ``settle_time`` and ``averaging`` hints are replaced by ``experiment``'s (:meth:`gma_settings`).
+        altitude: what the model's altitude constraint bounds (:attr:`KiteOCPSettings.altitude
+            <kite_rto.rto.ocp.KiteOCPSettings>`): ``"lap"``, the model lap's lowest point, or ``"reference"``, the
+            lowest point of the reference figure-eight of the lap's setpoints.
         max_repeats: times a crashed/invalid experiment is repeated before it is submitted as measured
             (NaN-free) or, with no lap at all, the run stops (>= 0).
         c0: initial setpoints (theta_0, A_phi, A_theta), rad; None = the model-only optimum.
@@ -75,6 +79,7 @@ class KiteRTOSettings:
     n_directions: int = 3
     uncertainty: ModelUncertainty = field(default_factory=ModelUncertainty)
     gma: GMASettings = field(default_factory=default_gma_settings)
+    altitude: str = "lap"
     max_repeats: int = 3
     c0: tuple | None = None
 
@@ -91,12 +96,19 @@ class KiteRTOSettings:
             raise ValueError(f"{n}.gma = {self.gma!r}: expected a GMASettings")
         if isinstance(self.n_directions, bool) or self.n_directions not in (1, 2, 3):
             raise ValueError(f"{n}.n_directions = {self.n_directions!r}: expected 1, 2 or 3")
+        if self.altitude not in ALTITUDES:
+            raise ValueError(f"{n}.altitude = {self.altitude!r}: expected one of {ALTITUDES}")
         if isinstance(self.max_repeats, bool) or not isinstance(self.max_repeats, int) or self.max_repeats < 0:
             raise ValueError(f"{n}.max_repeats = {self.max_repeats!r}: expected an integer >= 0")
 
     def with_gma(self, **changes) -> "KiteRTOSettings":
         """A copy with ``changes`` applied to :attr:`gma` (e.g. ``with_gma(filter_gain=0.8)``)."""
         return replace(self, gma=replace(self.gma, **changes))
+
+    def ocp_settings(self) -> KiteOCPSettings:
+        """The lap OCP's :class:`~kite_rto.rto.ocp.KiteOCPSettings`: the experiment's h_min (m) and
+        :attr:`altitude`, the rest at their defaults."""
+        return KiteOCPSettings(h_min=self.experiment.h_min, altitude=self.altitude)
 
     def gma_settings(self) -> GMASettings:
         """The :class:`GMASettings` GMA runs with: :attr:`gma` with the experiment's settle time (s) and
