@@ -8,7 +8,8 @@ import pytest
 from kite_rto.kite.model import STEP_OUTPUT_NAMES, shared_model
 from kite_rto.kite.params import KiteParams
 from kite_rto.rto.experiment import DEFAULT_WIND_SOURCES, ExperimentEvaluator, ExperimentSpec, default_wind_source
-from kite_rto.rto.wind_source import WIND_SOURCES, LaggedAnemometer, ObserverWind, make_wind_source
+from kite_rto.rto.wind_source import (PROFILE_EXPONENTS, WIND_SOURCES, LaggedAnemometer, ObserverWind,
+                                     ProfileObserverWind, make_wind_source)
 
 MODEL = shared_model()
 PARAMS = KiteParams()
@@ -139,3 +140,64 @@ def test_wind_source_settings_are_validated_with_the_bad_value_named():
     assert ExperimentSpec(wind_source="anemometer_lagged").source == "anemometer_lagged"
     assert set(DEFAULT_WIND_SOURCES.values()) <= set(WIND_SOURCES)
     assert default_wind_source("uniform") == "anemometer"
+
+
+def sheared_kite(t: float, shear: float, theta_amp: float, period: float = 10.0):
+    """The synthetic kite of :func:`kite` (reference wind 8 m/s, read exactly by the anemometer) in a wind profile
+    of exponent ``shear``, its figure-eight ``theta_amp`` rad high: a kite that sweeps through the shear."""
+    s = 2 * math.pi * t / period
+    theta, phi, psi, delta = 0.6 + theta_amp * math.sin(2 * s), 0.7 * math.sin(s), math.pi / 2 * math.cos(s), 0.3
+    p = PARAMS.as_vector()
+    p[KiteParams.names().index("shear")] = shear
+    xdot, _ = MODEL.rhs_py([theta, phi, psi], delta, p)
+    tension = MODEL.step_py([theta, phi, psi], delta, p, 0.0)[1][_TENSION]
+    z = PARAMS.r * math.sin(theta) * math.cos(phi)
+    return SimpleNamespace(t=t, theta=theta, phi=phi, psi=psi, theta_dot=xdot[0], phi_dot=xdot[1], tension=tension,
+                           position=(PARAMS.r * math.cos(theta), PARAMS.r * math.sin(theta) * math.sin(phi), z),
+                           wind_ref=PARAMS.w_ref, crashes=0)
+
+
+@pytest.mark.parametrize("exponent", PROFILE_EXPONENTS)
+def test_profile_observer_learns_the_plants_shear(exponent):
+    """In a steady profile of exponent 0.25 (the model's is 0.15) the learned exponent is the plant's and the
+    estimate at z_c is the true wind there; before ``learn_after`` the prior is used."""
+    src = ProfileObserverWind(8.0, PARAMS, z_c=150.0, learn_after=30.0, exponent=exponent)
+    for k in range(1, 2500):
+        w = src.update(sheared_kite(0.02 * k, 0.25, 0.15))
+        if k == 1000:
+            assert src.shear == PARAMS.shear                     # 20 s in: still the prior
+    assert src.shear == pytest.approx(0.25, abs=0.005)
+    assert src.wind == pytest.approx(PARAMS.w_ref * (150.0 / PARAMS.z_ref) ** 0.25, rel=0.002)
+    assert w == pytest.approx(src.wind * (PARAMS.z_ref / 150.0) ** PARAMS.shear, rel=1e-12)
+    assert src.scale() == 8.0
+
+
+def _ratio(source: str, theta_amp: float) -> float:
+    """Normalized over raw tension of one 4-lap experiment of :func:`sheared_kite` (exponent 0.25) after 70 s."""
+    ev = ExperimentEvaluator(ExperimentSpec(settle_time=70.0, settle_laps=1, n_laps=4, wind_source=source))
+    ev.start(0.0)
+    t, out = 0.0, None
+    while out is None:
+        t += 0.02
+        out = ev.update(sheared_kite(t, 0.25, theta_amp))
+    return out.tension_kn / out.mean_tension_kn
+
+
+def test_profile_observer_normalizes_every_path_alike():
+    """A steady wind is no gust: the normalized / raw ratio must not depend on the path. With "observer" it
+    does (its estimate at the kite lags the altitude sweep, and the model's exponent is not the plant's);
+    with "observer_profile" it does not."""
+    low, high = _ratio("observer", 0.05), _ratio("observer", 0.15)
+    assert abs(high / low - 1.0) > 0.01
+    low, high = _ratio("observer_profile", 0.05), _ratio("observer_profile", 0.15)
+    assert high / low == pytest.approx(1.0, abs=0.001)
+
+
+def test_profile_observer_names_bad_settings():
+    with pytest.raises(ValueError, match="'kalman'"):
+        ProfileObserverWind(8.0, PARAMS, exponent="kalman")
+    with pytest.raises(ValueError, match="z_c"):
+        ProfileObserverWind(8.0, PARAMS, z_c=-1.0)
+    with pytest.raises(ValueError, match="theta_dot"):
+        make_wind_source("observer_profile", 8.0).update(SimpleNamespace(t=0.0, theta=0.5, psi=1.0, phi=0.1,
+                                                                         position=(0.0, 0.0, 100.0)))
