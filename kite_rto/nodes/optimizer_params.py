@@ -55,7 +55,8 @@ PARAMS = (
               unit="dimensionless"),
     ParamSpec("modifier_drift", -1.0 if _S.gma.modifier_drift is None else _S.gma.modifier_drift,
               "GMA modifier filter matched to the gradient noise: bound on the plant-model curvature mismatch "
-              "(negative = off: the fixed modifier_filter)", -1.0, 1.0e6, unit="cost units per squared box width"),
+              "(negative = off: the fixed modifier_filter, and the altitude modifier's own noise filter off too)",
+              -1.0, 1.0e6, unit="cost units per squared box width"),
     ParamSpec("model_secant", _S.gma.model_secant, "GMA gradient modifiers from the model's own difference "
               "quotients over the flown points (cancels the finite differences' truncation error up to the "
               "plant-model curvature mismatch; false: plant quotient minus the model's gradient)"),
@@ -120,10 +121,12 @@ def settings_from_params(v: dict) -> KiteRTOSettings:
         spec = replace(_E, n_laps=v["n_laps"], settle_laps=v["settle_laps"], settle_time=v["settle_time"],
                        max_duration=v["max_duration"], normalize=v["normalize"], wind_source=v["wind_source"],
                        h_min=v["h_min"])
+        drift = None if v["modifier_drift"] < 0 else v["modifier_drift"]
         return replace(_S, experiment=spec, box=_shape_box(v), gradient=v["gradient"],
-                       n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3,
-                       altitude=v["altitude_constraint"]).with_gma(filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
-                                  modifier_drift=None if v["modifier_drift"] < 0 else v["modifier_drift"],
-                                  model_secant=v["model_secant"], trust_radius=v["trust_radius"])
+                       n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3, altitude=v["altitude_constraint"]
+                       ).with_gma(filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
+                                  modifier_drift=drift, model_secant=v["model_secant"], trust_radius=v["trust_radius"],
+                                  # the altitude's own noise filter is part of the noise-matched one
+                                  constraint_drift=None if drift is None else _S.gma.constraint_drift)
     except ValueError as err:
         raise ParameterError(str(err)) from None

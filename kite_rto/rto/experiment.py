@@ -29,10 +29,11 @@ from .wind_source import WIND_SOURCES, make_wind_source
 __all__ = ["ExperimentSpec", "ExperimentOutcome", "ExperimentEvaluator", "PlantFlight", "DEFAULT_WIND_SOURCES",
            "default_wind_source"]
 
-DEFAULT_WIND_SOURCES = {"uniform": "anemometer", "field": "observer"}
+DEFAULT_WIND_SOURCES = {"uniform": "anemometer", "field": "observer_profile"}
 """The experiment's wind source for each plant wind model (``PlantConfig.wind_model``), chosen by
 ``benchmarks/bench_normalization.py``: with the uniform gust the anemometer measures the kite's own gust; in the
-3-D field the observer at the kite scatters least (docs/benchmarks.md, "Realistic wind")."""
+3-D field the observer at the kite scatters least (docs/benchmarks.md, "Realistic wind"), and its profile form
+scatters as little without bending the cost between paths (``benchmarks/bench_normalization_bias.py``)."""
 
 
 def default_wind_source(wind_model: str = DEFAULT_WIND_MODEL) -> str:

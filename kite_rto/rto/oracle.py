@@ -31,7 +31,9 @@ from ..kite.plant import PlantConfig
 
 __all__ = ["OracleResult", "plant_performance", "find_oracle", "oracle_cache_dir", "CACHE_ENV"]
 
-_SPEC = ExperimentSpec(settle_time=40.0, settle_laps=1, n_laps=3, normalize=False)
+_SPEC = ExperimentSpec(settle_time=40.0, settle_laps=1, n_laps=3, normalize=False, wind_source="observer")
+"""The oracle's experiment: raw lap tensions (``normalize=False``; the wind source is then unused and pinned, so
+that a change of the default wind source keeps the cached oracles' keys)."""
 _MEMO: dict = {}
 
 
