@@ -130,3 +130,32 @@ def test_cost_only_keeps_the_plant_constraint_quotients():
     np.testing.assert_allclose(cost_only.constraints, plant_est.constraints)
     with pytest.raises(ValueError, match="model_secant_constraints=1: expected True or False"):
         GMASettings(model_secant_constraints=1)
+
+
+def test_secant_within_corrects_only_after_a_short_step_and_still_reaches_the_plant_optimum():
+    """``model_secant_within``: no correction at k = 0 (no previous step) nor after a step longer than the bound
+    (box widths, largest entry); the same fixed point as the correction in every iteration once steps are short.
+    The first record is the uncorrected run's to the digit."""
+    h, within = 0.5, 0.05
+    runs = {}
+    for w in (within, np.inf, None):
+        s = GMASettings(filter_gain=1.0, trust_radius=1.0, model_secant=w is not None,
+                        model_secant_within=w if w is not None else np.inf)
+        gma = GMA(model(), s, DirectionalGradient(D, step=h, reuse=False))
+        run_offline(gma, plant, 12)
+        runs[w] = gma
+    recs = runs[within].records
+    width = model().c_width
+    corrected = [any("model secant" in n for n in r.notes) for r in recs]
+    expected = [k > 0 and float(np.max(np.abs(recs[k - 1].step) / width)) <= within for k in range(len(recs))]
+    assert corrected == expected
+    assert not corrected[0] and any(corrected) and not all(corrected)
+    np.testing.assert_array_equal(recs[0].c_next, runs[None].records[0].c_next)
+    np.testing.assert_allclose(runs[within].c, plant_optimum(), atol=1e-6)
+    np.testing.assert_allclose(runs[np.inf].c, plant_optimum(), atol=1e-6)
+
+
+@pytest.mark.parametrize("bad", [0.0, -0.1, float("nan")])
+def test_secant_within_must_be_positive(bad):
+    with pytest.raises(ValueError, match="model_secant_within"):
+        GMASettings(model_secant_within=bad)

@@ -7,6 +7,7 @@ the step and records an :class:`IterationRecord`.
 """
 from __future__ import annotations
 
+import math
 import time
 from copy import deepcopy
 from types import SimpleNamespace
@@ -456,7 +457,7 @@ class GMA:
         """The plant gradients at ``c_k`` from this iteration's experiments and the earlier ones."""
         past = self._points(exclude_iteration=self._k)
         est = self.gradient.estimate_at(c_k, nominal, new, past, model)
-        if not (self.settings.model_secant and model.success and est.quality > 0
+        if not (self.settings.model_secant and self._secant_near() and model.success and est.quality > 0
                 and np.all(np.isfinite(est.cost)) and np.all(np.isfinite(est.constraints))):
             return est
         est, note = model_secant_estimate(self.gradient, est, c_k, nominal, new, past, model,
@@ -464,6 +465,15 @@ class GMA:
                                           self.settings.model_secant_constraints)
         est.notes = "; ".join(n for n in (est.notes, note) if n)
         return est
+
+    def _secant_near(self) -> bool:
+        """Whether the previous iteration's step was within ``model_secant_within`` box widths (always with
+        ``inf``; never at ``k = 0`` otherwise). Read from the stored records, so a resumed run decides alike."""
+        within = self.settings.model_secant_within
+        if math.isinf(within):
+            return True
+        its = self.history.iterations
+        return bool(its) and float(np.max(np.abs(its[-1].step) / self._width)) <= within
 
     def _model_values(self, c, x0) -> tuple:
         """``(phi_hat, g_hat)`` of the model's realization of ``c`` (``min phi s.t. y(u) = c``, started from

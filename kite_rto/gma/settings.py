@@ -129,6 +129,12 @@ class GMASettings:
             plant-model curvature mismatch; one model solve per point used. Off by default.
         model_secant_constraints: with ``model_secant``, correct the constraints' gradient modifiers too (False:
             the cost's only, the constraints keep ``secant_p - grad g_hat``).
+        model_secant_within: with ``model_secant``, correct only in iterations whose operating point the previous
+            iteration reached with a step of at most this length (largest entry, relative to the setpoint box
+            width; ``> 0``); ``inf`` (default) = every iteration, from ``k = 0``. With a finite value iteration 0,
+            with no previous step, is never corrected. The truncation error matters where GMA stops moving,
+            within about a perturbation of the point where the plant's *secant* vanishes; further away it is
+            small against the gradient, and the correction adds the plant-model curvature mismatch to every step.
         settle_time: hint copied into every :class:`ExperimentRequest` (generic units, e.g. s or laps), ``>= 0``.
         averaging: averaging-length hint copied into every request (generic units), ``> 0``.
         structure_check_every: measured structure check (issue #14 item 2, ``docs/gma.md``): every this many
@@ -199,6 +205,7 @@ class GMASettings:
     model_point: str = "consistent"
     model_secant: bool = False
     model_secant_constraints: bool = True
+    model_secant_within: float = math.inf
     settle_time: float = 0.0
     averaging: float = 1.0
     structure_check_every: int = 0
@@ -247,6 +254,7 @@ class GMASettings:
                              f"'realization'")
         _check_bool("model_secant", self.model_secant)
         _check_bool("model_secant_constraints", self.model_secant_constraints)
+        _check("model_secant_within", self.model_secant_within, 0.0, None, low_open=True, inf_ok=True)
         _check("settle_time", self.settle_time, 0.0, None)
         _check("averaging", self.averaging, 0.0, None, low_open=True)
         _check_int("structure_check_every", self.structure_check_every, 0, " (0 = off)")
