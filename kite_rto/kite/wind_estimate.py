@@ -107,12 +107,19 @@ class WindObserver:
     def update(self, m) -> float:
         """Add one measurement; returns the estimate of the wind at the kite, m/s."""
         y, h = drift_measurement(m.theta, m.psi, m.theta_dot, m.phi_dot, self.params.r)
+        return self.fit(y, h, m.t if self._forget is None else None)
+
+    def fit(self, y: float, g: float, t: float | None = None) -> float:
+        """One step of the recursive least squares of ``y = w g`` with exponential forgetting (``time_constant``;
+        over ``dt``, or over the time since the previous call's ``t`` s when ``dt`` is None); ``w`` is updated
+        once the weighted sum of ``g^2`` reaches ``min_information``. Returns ``w`` (units of ``y / g``).
+        :meth:`update` calls it with the drift measurement ``y = h w``; other regressors (a wind profile) reuse it."""
         f = self._forget
         if f is None:                   # forgetting over the time since the previous measurement
-            prev, self._t = self._t, m.t
-            f = 1.0 if prev is None else math.exp(-(m.t - prev) / self.settings.time_constant)
-        self._shy = f * self._shy + h * y
-        self._shh = f * self._shh + h * h
+            prev, self._t = self._t, t
+            f = 1.0 if prev is None else math.exp(-(t - prev) / self.settings.time_constant)
+        self._shy = f * self._shy + g * y
+        self._shh = f * self._shh + g * g
         if self._shh >= self.settings.min_information:
             self.wind = self._shy / self._shh
         return self.wind

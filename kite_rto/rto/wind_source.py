@@ -185,8 +185,7 @@ class ObserverWind(WindSource):
         try:
             w = self.observer.observe(m)
         except AttributeError as err:
-            raise ValueError(f"wind source 'observer': the measurement lacks {err.name!r} (it needs theta, psi, "
-                             f"theta_dot, phi_dot, t and position)") from None
+            raise _lacks("observer", err) from None
         self._obs.add(w)
         if math.isfinite(w):
             self._anemo.add(m.wind_ref)
@@ -198,6 +197,12 @@ class ObserverWind(WindSource):
         w = self._obs.value if self.calibration == "observer" else \
             self.w_nominal * self._obs.value / self._anemo.value
         return w if math.isfinite(w) and w > 0 else self.w_nominal
+
+
+def _lacks(source: str, err: AttributeError) -> ValueError:
+    """The error of an observer wind source whose measurement lacks attribute ``err.name``."""
+    return ValueError(f"wind source {source!r}: the measurement lacks {err.name!r} (it needs theta, psi, theta_dot, "
+                      f"phi_dot, t and position)")
 
 
 PROFILE_EXPONENTS = ("anemometer", "lap")
@@ -245,8 +250,8 @@ class ProfileObserverWind(WindSource):
         """Exponent in use (the prior until it is learned)."""
         self.wind = math.nan
         """Current estimate of the wind at ``z_c``, m/s."""
-        self._t0 = self._t = None
-        self._shy = self._shh = 0.0
+        self._t0 = None
+        self._rls = WindObserver(params, None, self.settings)     # the w_c fit, with regressor g (docstring)
         self._s = [0.0] * 5          # sum g0^2, g0^2 l, g0^2 l^2, g0 y, g0 l y
 
     def update(self, m) -> float:
@@ -254,8 +259,7 @@ class ProfileObserverWind(WindSource):
             y, h = drift_measurement(m.theta, m.psi, m.theta_dot, m.phi_dot, self.params.r)
             z, t = m.position[2], m.t
         except AttributeError as err:
-            raise ValueError(f"wind source 'observer_profile': the measurement lacks {err.name!r} (it needs theta, "
-                             f"psi, theta_dot, phi_dot, t and position)") from None
+            raise _lacks("observer_profile", err) from None
         p = self.params
         self._anemo.add(getattr(m, "wind_ref", math.nan))
         rel = max(z, MIN_WIND_HEIGHT) / self.z_c
@@ -271,13 +275,7 @@ class ProfileObserverWind(WindSource):
             self._t0 = t
         if t - self._t0 >= self.learn_after:
             self._learn()
-        f = 1.0 if self._t is None else math.exp(-(t - self._t) / self.settings.time_constant)
-        self._t = t
-        g = h * rel ** self.shear
-        self._shy = f * self._shy + g * y
-        self._shh = f * self._shh + g * g
-        if self._shh >= self.settings.min_information:
-            self.wind = self._shy / self._shh
+        self.wind = self._rls.fit(y, h * rel ** self.shear, t)
         return self.wind * (p.z_ref / self.z_c) ** p.shear
 
     def _learn(self) -> None:
