@@ -109,3 +109,47 @@ def test_safe_filtered_predicts_with_the_modified_problems_jacobian(filtered):
     assert checked >= 2
     with pytest.raises(ValueError, match="safe_filtered='no': expected True or False"):
         GMASettings(safe_filtered="no")
+
+
+def test_truncation_bound_of_forward_differences_is_half_the_step_times_the_perturbation():
+    """Coordinate forward differences of h_i (box widths): a_i = d_i / h_i, bound 0.5 sum |d_i| h_i."""
+    from kite_rto.gma.safety import truncation_bound
+    w = np.array([2.0, 0.5])
+    disp = np.array([[0.3, 0.0], [0.0, -0.1]])
+    step = np.array([0.2, 0.05])
+    h, d = np.array([0.3, -0.1]) / w, step / w
+    assert truncation_bound(disp, step, w) == pytest.approx(0.5 * np.sum(np.abs(d) * np.abs(h)))
+    assert truncation_bound(np.zeros((0, 2)), step, w) == 0.0
+
+
+def _one_setpoint():
+    """Maximize c in [0, 1]; the model's constraint c - 2 never binds, the plant's 5 (c - 0.3)^2 - 1.2 <= 0 binds at
+    c = 0.79. From c0 = 0.6 the forward difference of 0.5 would leave the box, so it is taken backwards (to 0.1):
+    its secant 0.5 is a sixth of the plant's slope 3 at c0, and the step towards c = 1 sees almost no rise."""
+    u = ca.SX.sym("u", 1)
+    problem = ModelProblem(u=u, cost=-u[0], constraints=u[0] - 2.0, outputs=u, lbu=[0], ubu=[1], u0=[0.6],
+                           c_lb=[0], c_ub=[1], name="truncation")
+
+    def plant1(c):
+        return -float(c[0]), np.array([5.0 * (c[0] - 0.3) ** 2 - 1.2])
+    return problem, plant1
+
+
+@pytest.mark.parametrize("truncation", [False, True])
+def test_a_backward_perturbation_needs_the_truncation_bound_to_keep_the_step_safe(truncation):
+    """Curvature bound M = 10, the plant's own: with the truncation bound the first step ends on the plant's
+    constraint (the bound is tight for a quadratic), without it 0.85 of the step is taken and the plant's
+    constraint is exceeded by 0.85."""
+    problem, plant1 = _one_setpoint()
+    s = GMASettings(filter_gain=1.0, trust_radius=np.inf, trust_adapt=False, safe_curvature=10.0, safe_sigma=0.0,
+                    safe_truncation=truncation)
+    gma = GMA(problem, s, FiniteDifferenceGradient(0.5), c0=[0.6])
+    run_offline(gma, plant1, 1)
+    rec = gma.records[0]
+    assert rec.c_k[0] == pytest.approx(0.6)
+    g_next = plant1(rec.c_next)[1][0]
+    if truncation:
+        assert g_next <= 1e-9 and rec.c_next[0] == pytest.approx(0.3 + np.sqrt(0.24), abs=1e-6)
+        assert any("truncation bound +1" in n for n in rec.notes)
+    else:
+        assert g_next > 0.5

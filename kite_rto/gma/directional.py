@@ -176,7 +176,7 @@ class DirectionalGradient(GradientEstimator):
         source = "perturbations" if len(new) else "past points"
         return GradientEstimate(g_phi + corr[:, 0], j_g + corr[:, 1:].T, rcond, std,
                                 f"directional ({self.n_directions} of {n_c})",
-                                f"{len(pts)} {source}, b = {np.round(b[:, 0], 6).tolist()}")
+                                f"{len(pts)} {source}, b = {np.round(b[:, 0], 6).tolist()}", dc)
 
 
 @dataclass

@@ -25,7 +25,7 @@ from .noise_filter import noise_gain
 from .problem import ModelProblem
 from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
 from .settings import GMASettings, per_setpoint
-from .safety import observed_curvature, safe_fraction
+from .safety import observed_curvature, safe_fraction, truncation_bound
 from .kkt import kkt_test
 from .structure import excluded_directions, structure_plan, structure_test
 
@@ -536,12 +536,16 @@ class GMA:
         seen = observed_curvature(list(recs) + [current], stds, w, s.safe_sigma, s.safe_adapt_min_step, n_g)
         M = np.maximum(per_setpoint("safe_curvature", s.safe_curvature, n_g), seen)
         tol = per_setpoint("safe_tolerance", s.safe_tolerance, n_g)
-        alpha, j = safe_fraction(nominal.constraints, g_std, est.constraints.reshape(n_g, -1) @ step, slope_std,
-                                 M, float(np.sum((step / w) ** 2)), s.safe_sigma, tol)
+        trunc = np.zeros(n_g)
+        if s.safe_truncation and est.displacements is not None:
+            trunc = M * truncation_bound(est.displacements, step, w)
+        alpha, j = safe_fraction(nominal.constraints, g_std, est.constraints.reshape(n_g, -1) @ step + trunc,
+                                 slope_std, M, float(np.sum((step / w) ** 2)), s.safe_sigma, tol)
         if j is not None:
             notes.append(f"safe step: scaled by {alpha:.3g} (g[{j}] = {nominal.constraints[j]:+.4g}, predicted "
-                         f"change {float(est.constraints.reshape(n_g, -1)[j] @ step):+.4g}, curvature bound "
-                         f"{M[j]:.4g})" + ("; trust region shrunk" if s.safe_shrink else ""))
+                         f"change {float(est.constraints.reshape(n_g, -1)[j] @ step):+.4g}, "
+                         + (f"truncation bound {trunc[j]:+.4g}, " if s.safe_truncation else "")
+                         + f"curvature bound {M[j]:.4g})" + ("; trust region shrunk" if s.safe_shrink else ""))
         return alpha
 
     def _restored_column(self, dc: np.ndarray) -> np.ndarray:

@@ -48,6 +48,10 @@ class GradientEstimate:
             ``None`` when the measurements carried no standard deviation.
         method: name of the strategy that produced it.
         notes: free text (e.g. why a fallback was used).
+        displacements: ``c_j - c_k`` (m, n_c) of the points whose differences from the nominal one the
+            estimate is a linear fit of (setpoint units), for the truncation bound of safe steps
+            (``GMASettings.safe_truncation``); ``None`` when the estimate is not such a fit (central differences,
+            whose error is of third order).
     """
 
     cost: np.ndarray
@@ -56,6 +60,7 @@ class GradientEstimate:
     cost_std: np.ndarray | None = None
     method: str = ""
     notes: str = ""
+    displacements: np.ndarray | None = None
 
 
 class GradientEstimator(ABC):
@@ -198,8 +203,9 @@ class FiniteDifferenceGradient(GradientEstimator):
                 sa = a.cost_std if a.cost_std is not None else nominal.cost_std
                 sb = b.cost_std if b.cost_std is not None else nominal.cost_std
                 std[i] = math.hypot(sa, sb) / abs(dc)
+        disp = None if per == 2 else np.array([np.asarray(p.c, float) - c_k for p in new])
         return GradientEstimate(grad, jac, 1.0 if ok else 0.0, std, f"finite-difference ({self.scheme})",
-                                "" if ok else "a step collapsed on the setpoint box")
+                                "" if ok else "a step collapsed on the setpoint box", disp)
 
 
 class LeastSquaresGradient(GradientEstimator):
@@ -271,4 +277,4 @@ class LeastSquaresGradient(GradientEstimator):
             cov = np.linalg.pinv(dc.T @ dc) * 2.0 * nominal.cost_std ** 2
             std = np.sqrt(np.diag(cov))
         return GradientEstimate(sol[:, 0], sol[:, 1:].T.copy(), rcond, std, "least-squares (past points)",
-                                f"{len(chosen)} past points")
+                                f"{len(chosen)} past points", dc)

@@ -97,5 +97,6 @@ def model_secant_estimate(estimator: GradientEstimator, plant: GradientEstimate,
     if not (np.all(np.isfinite(cost)) and np.all(np.isfinite(cons))):
         return plant, "model secant not finite: the plant's difference quotients used as they are"
     diff = g_phi - own.cost
-    return (GradientEstimate(cost, cons, plant.quality, plant.cost_std, plant.method, plant.notes),
+    return (GradientEstimate(cost, cons, plant.quality, plant.cost_std, plant.method, plant.notes,
+                             plant.displacements),
             f"model secant: truncation correction {np.round(diff, 6).tolist()} on the cost gradient")

@@ -22,7 +22,27 @@ import math
 
 import numpy as np
 
-__all__ = ["safe_fraction", "observed_curvature"]
+__all__ = ["safe_fraction", "observed_curvature", "truncation_bound"]
+
+
+def truncation_bound(displacements, step, width) -> float:
+    """``0.5 sum_i |a_i| |p_i|^2`` (squared box widths): how far, per unit of curvature bound ``M``, the
+    truncation errors of a gradient fitted to differences over the points ``p_i = displacements[i] / width``
+    can move its prediction of the change over ``step`` (``d = step / width = sum_i a_i p_i``, ``a`` the
+    least-squares combination). Each difference ``f(c_k + p_i) - f(c_k)`` is the gradient's term plus at most
+    ``0.5 M |p_i|^2``; a fit that is linear in those differences passes them on with weights ``a_i``.
+
+    Args:
+        displacements: ``c_i - c_k`` (m, n_c), setpoint units.
+        step: the step (n_c,), setpoint units.
+        width: box width per setpoint (n_c,).
+    """
+    w = np.asarray(width, float)
+    P = np.asarray(displacements, float).reshape(-1, w.size) / w
+    if P.shape[0] == 0:
+        return 0.0
+    a, *_ = np.linalg.lstsq(P.T, np.asarray(step, float) / w, rcond=None)
+    return 0.5 * float(np.abs(a) @ np.sum(P ** 2, axis=1))
 
 
 def safe_fraction(g, g_std, slope, slope_std, curvature, step_sq: float, sigma: float, tolerance

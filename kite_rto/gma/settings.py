@@ -169,6 +169,11 @@ class GMASettings:
             (model plus the filtered ``mu``, the one the step was chosen with) instead of this iteration's raw
             estimate; with a modifier filter the two differ, and the raw one can veto every step the filtered one
             proposes. Off by default.
+        safe_truncation: add the gradient estimate's own truncation error to the predicted change: the
+            differences over the points ``p_i`` (box widths) the estimate fits carry second-order errors up to
+            ``0.5 M |p_i|^2`` each, which move the predicted change over the step ``d = sum a_i p_i`` by up to
+            ``0.5 M sum |a_i| |p_i|^2`` (``docs/gma.md``, *Safe steps*). Matters where a perturbation was taken
+            on the other side of ``c_k`` than the step (at a bound) or is longer than it. Off by default.
         safe_shrink: shrink the trust radius (by ``trust_shrink``) whenever a safe step shortens the filtered
             step (True, default); False leaves the radius to ``trust_adapt``: the safe step already limits that
             step, and shrinking as well compounds, over iterations, to the smallest radius.
@@ -220,6 +225,7 @@ class GMASettings:
     safe_adapt_min_step: float = 0.01
     safe_shrink: bool = True
     safe_filtered: bool = False
+    safe_truncation: bool = False
     noise_ratio: float = 0.5
     max_repeats_noise: int = 0
     max_ipopt_iter: int = 1000
@@ -272,6 +278,7 @@ class GMASettings:
         _check("safe_tolerance", self.safe_tolerance, 0.0, None)
         _check("safe_adapt_min_step", self.safe_adapt_min_step, 0.0, None)
         _check_bool("safe_filtered", self.safe_filtered)
+        _check_bool("safe_truncation", self.safe_truncation)
         _check_bool("safe_shrink", self.safe_shrink)
         _check("noise_ratio", self.noise_ratio, 0.0, None, low_open=True)
         _check_int("max_repeats_noise", self.max_repeats_noise, 0, " (0 = off)")
