@@ -539,11 +539,12 @@ class GMA:
         trunc = np.zeros(n_g)
         if s.safe_truncation and est.displacements is not None:
             trunc = M * truncation_bound(est.displacements, step, w)
-        alpha, j = safe_fraction(nominal.constraints, g_std, est.constraints.reshape(n_g, -1) @ step + trunc,
-                                 slope_std, M, float(np.sum((step / w) ** 2)), s.safe_sigma, tol)
+        slope = est.constraints.reshape(n_g, -1) @ step
+        alpha, j = safe_fraction(nominal.constraints, g_std, slope + trunc, slope_std, M,
+                                 float(np.sum((step / w) ** 2)), s.safe_sigma, tol)
         if j is not None:
             notes.append(f"safe step: scaled by {alpha:.3g} (g[{j}] = {nominal.constraints[j]:+.4g}, predicted "
-                         f"change {float(est.constraints.reshape(n_g, -1)[j] @ step):+.4g}, "
+                         f"change {float(slope[j]):+.4g}, "
                          + (f"truncation bound {trunc[j]:+.4g}, " if s.safe_truncation else "")
                          + f"curvature bound {M[j]:.4g})" + ("; trust region shrunk" if s.safe_shrink else ""))
         return alpha

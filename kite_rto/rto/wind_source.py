@@ -248,8 +248,6 @@ class ProfileObserverWind(WindSource):
         self.z_c, self.learn_after = float(z_c), float(learn_after)
         self.shear = float(params.shear)
         """Exponent in use (the prior until it is learned)."""
-        self.wind = math.nan
-        """Current estimate of the wind at ``z_c``, m/s."""
         self._t0 = None
         self._rls = WindObserver(params, None, self.settings)     # the w_c fit, with regressor g (docstring)
         self._s = [0.0] * 5          # sum g0^2, g0^2 l, g0^2 l^2, g0 y, g0 l y
@@ -275,8 +273,12 @@ class ProfileObserverWind(WindSource):
             self._t0 = t
         if t - self._t0 >= self.learn_after:
             self._learn()
-        self.wind = self._rls.fit(y, h * rel ** self.shear, t)
-        return self.wind * (p.z_ref / self.z_c) ** p.shear
+        return self._rls.fit(y, h * rel ** self.shear, t) * (p.z_ref / self.z_c) ** p.shear
+
+    @property
+    def wind(self) -> float:
+        """Current estimate of the wind at ``z_c``, m/s (NaN until enough information has come in)."""
+        return self._rls.wind
 
     def _learn(self) -> None:
         s = self._s
