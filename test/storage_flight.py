@@ -66,7 +66,7 @@ class Evaluator:
         self.active = False
         self.wind_estimate = math.nan
 
-    def start(self, t, c=None):
+    def start(self, t, c=None, n_laps=None):
         self.c, self.t_start, self.active = np.array(c, dtype=float), float(t), True
 
     def update(self, m):

@@ -114,6 +114,27 @@ def test_session_repeats_a_crashed_experiment(quick_settings):
     assert again is not None and np.allclose(again, c) and session.repeats == 1 and not session.experiments
 
 
+def test_session_flies_the_laps_of_the_averaging_schedule(quick_settings):
+    """GMA's averaging hint scales the spec's laps: 1 lap per experiment in iteration 0, 2 from iteration 1 on
+    (``averaging_schedule`` (1, 2)); a crashed experiment is flown again with its own laps."""
+    settings = replace(quick_settings, experiment=replace(quick_settings.experiment, settle_time=0.0,
+                                                          settle_laps=0, n_laps=1))
+    gma = make_gma(settings.with_gma(averaging_schedule=(1, 2)))
+    session = RTOSession(gma, settings.experiment)
+    session.start(0.0)
+    t, crash, k1_start = 0.0, 0, None
+    while len(session.experiments) < 6 and t < 300:
+        t += 0.05
+        if session.request.request_id.startswith("k1-0") and k1_start is None:
+            k1_start = t
+        if k1_start is not None and t > k1_start + 5.0:
+            crash = 1                           # one crash, 5 s into iteration 1's first experiment
+        session.on_measurement(_synthetic(t, crashes=crash))
+    laps = [(log.request_id.split("-")[0], log.outcome.n_laps, log.repeats) for log in session.experiments]
+    assert laps == [("k0", 1, 0)] * 4 + [("k1", 2, 1), ("k1", 2, 0)], laps
+    assert session.evaluator.n_laps == 2
+
+
 def test_kite_privileged_directions_under_the_literature_prior_measure_all_three_coordinates():
     from kite_rto.rto.builder import bound_activity, gma_directions
     settings = KiteRTOSettings()

@@ -53,6 +53,15 @@ class DirectionalGradient(GradientEstimator):
             for reuse: ``min(s_min, 1) / max(s_max, 1)`` of their singular values, 1 for full steps along every
             direction, smaller for short, long or ill-conditioned ones (also ``GradientEstimate.quality``).
 
+        alternate: step backwards in GMA's odd iterations (:meth:`plan_iteration`), so that a modifier filter
+            averages forward and backward quotients and their truncation errors cancel.
+        reflect: with ``alternate``, a backward iteration flies the forward iteration's perturbations reflected
+            through ``c_k`` and clipped to the box in every setpoint where that keeps at least half of the
+            displacement, and unreflected in the others (a setpoint held at or near its bound). Without it a direction whose backward step leaves the box is
+            flown forward whole, so a direction that mixes a setpoint at its bound with free ones never changes
+            side in the free ones either. Falls back to that rule when the reflected points are worse
+            conditioned than ``rcond_min``.
+
     A perturbation that would leave the setpoint box is taken backwards, and clipped to the box when that
     leaves it too (whichever keeps more of the direction). The fit always uses the setpoints actually flown.
     """
@@ -60,7 +69,8 @@ class DirectionalGradient(GradientEstimator):
     uses_model = True
 
     def __init__(self, directions, step: float = 0.5, reuse: bool = True, radius=None,
-                 window: int | None = None, rcond_min: float = 0.2, alternate: bool = False):
+                 window: int | None = None, rcond_min: float = 0.2, alternate: bool = False,
+                 reflect: bool = False):
         U = np.asarray(directions, dtype=float)
         if U.ndim == 1:
             U = U[:, None]
@@ -92,6 +102,9 @@ class DirectionalGradient(GradientEstimator):
             raise ValueError(f"DirectionalGradient.rcond_min={rcond_min!r}: expected a value in (0, 1]")
         self.rcond_min = float(rcond_min)
         self.alternate = _alternate_flag("DirectionalGradient", alternate)
+        if not isinstance(reflect, bool):
+            raise ValueError(f"DirectionalGradient.reflect={reflect!r}: expected True or False")
+        self.reflect = reflect
 
     @property
     def n_directions(self) -> int:
@@ -104,7 +117,7 @@ class DirectionalGradient(GradientEstimator):
         extra = np.asarray(extra, dtype=float).reshape(self.U.shape[0], -1)
         window = None if self.window == 2 * self.n_directions else self.window
         return DirectionalGradient(np.column_stack([self.U, extra]), self.step, self.reuse, self._radius_arg,
-                                   window, self.rcond_min, self.alternate)
+                                   window, self.rcond_min, self.alternate, self.reflect)
 
     def coordinates(self, dc) -> np.ndarray:
         """Direction-basis coordinates ``z = U^+ dc`` of setpoint displacements ``dc`` (n_c,) or (m, n_c)."""
@@ -135,8 +148,18 @@ class DirectionalGradient(GradientEstimator):
         c_k, prefer = np.asarray(c_k, float), _preferred_sign(self.alternate, iteration)
         if self.reuse and self._select(c_k, past)[1] >= self.rcond_min:
             return []
+        if self.reflect and prefer < 0:
+            lb, ub = np.asarray(lb, float), np.asarray(ub, float)
+            back = [_reflected(c_k, x, lb, ub) for x in self._sided(c_k, lb, ub, 1.0)]
+            if self._rcond(self.coordinates(np.array(back) - c_k)) >= self.rcond_min:
+                return back
+        return self._sided(c_k, lb, ub, prefer)
+
+    def _sided(self, c_k, lb, ub, prefer: float) -> list:
+        """One point per direction: the sign whose step, clipped to the box, keeps most of the direction
+        (``prefer`` first)."""
         points = []
-        for d in self.U.T:   # the sign whose step, clipped to the box, keeps most of the direction (prefer first)
+        for d in self.U.T:
             cands = [np.clip(c_k + sign * self.step * d, lb, ub) for sign in (prefer, -prefer)]
             kept = [abs(float(self.coordinates(c - c_k) @ self.coordinates(self.step * d))) for c in cands]
             # the other sign only when it keeps more than rounding does (both full steps inside the box differ
@@ -177,6 +200,13 @@ class DirectionalGradient(GradientEstimator):
         return GradientEstimate(g_phi + corr[:, 0], j_g + corr[:, 1:].T, rcond, std,
                                 f"directional ({self.n_directions} of {n_c})",
                                 f"{len(pts)} {source}, b = {np.round(b[:, 0], 6).tolist()}", dc)
+
+
+def _reflected(c_k: np.ndarray, x: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> np.ndarray:
+    """``x`` reflected through ``c_k`` and clipped to ``[lb, ub]`` in every setpoint where that keeps at least half
+    of the displacement's length; unreflected in the others (a setpoint at or near its bound)."""
+    back = np.clip(2.0 * c_k - x, lb, ub)
+    return np.where(np.abs(back - c_k) >= 0.5 * np.abs(x - c_k), back, x)
 
 
 @dataclass

@@ -249,12 +249,26 @@ class GMA:
         """The requests of the open iteration at operating point ``c`` (nominal first), ids ``<tag>-<j>-...``."""
         pr, s, k = self.problem, self.settings, self._k
         past = self._points(exclude_iteration=k)
-        pert = [np.asarray(x, float) for x in self.gradient.plan_iteration(c, pr.c_lb, pr.c_ub, past, k)]
+        pert = [np.asarray(x, float)
+                for x in self.gradient.plan_iteration(c, pr.c_lb, pr.c_ub, past, self._alternation_index())]
         struct = (structure_plan(c, self._excluded(), s.structure_step, pr.c_lb, pr.c_ub)
                   if self._structure_due() else [])
         plan = [(c.copy(), "nominal")] + [(x, "perturbation") for x in pert] + [(x, "structure") for x in struct]
-        return [ExperimentRequest(f"{tag}-{j}-{purpose}", x, purpose, k, s.settle_time, s.averaging)
+        return [ExperimentRequest(f"{tag}-{j}-{purpose}", x, purpose, k, s.settle_time, s.averaging_at(k))
                 for j, (x, purpose) in enumerate(plan)]
+
+    def _alternation_index(self) -> int:
+        """The iteration index the gradient estimator plans with: ``k``, or with a finite
+        ``GMASettings.alternate_within`` the number of completed iterations since the last step longer than that."""
+        within = self.settings.alternate_within
+        if math.isinf(within):
+            return self._k
+        n = 0
+        for rec in reversed(self.history.iterations):
+            if float(np.max(np.abs(rec.step) / self._width)) > within:
+                break
+            n += 1
+        return n
 
     def _excluded(self) -> np.ndarray:
         """(n_c, m) the directions the gradient estimator leaves to the model (none unless directional)."""

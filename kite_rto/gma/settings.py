@@ -135,8 +135,21 @@ class GMASettings:
             with no previous step, is never corrected. The truncation error matters where GMA stops moving,
             within about a perturbation of the point where the plant's *secant* vanishes; further away it is
             small against the gradient, and the correction adds the plant-model curvature mismatch to every step.
+        alternate_within: when an estimator alternates the side of its perturbations (``alternate`` of
+            :class:`~kite_rto.gma.FiniteDifferenceGradient` and :class:`~kite_rto.gma.DirectionalGradient`), count
+            its iterations from the last step longer than this (largest entry, relative to the setpoint box width;
+            ``> 0``): the first iteration after a long step perturbs forward, the next one backward, and so on,
+            so that sides alternate only where the iterate stays and the perturbations of the first, long steps
+            are all forward. ``inf`` (default) = GMA's iteration index (every odd iteration backward). Read from
+            the stored records, so a resumed run plans alike.
         settle_time: hint copied into every :class:`ExperimentRequest` (generic units, e.g. s or laps), ``>= 0``.
         averaging: averaging-length hint copied into every request (generic units), ``> 0``.
+        averaging_schedule: effort matched to the iteration (issue #14 item 4): multipliers of ``averaging`` by
+            iteration, the last one holding for every later iteration; each ``> 0``. Empty (default) = every
+            request gets ``averaging``. At the model optimum the plant gradient is large against its noise; near
+            the plant optimum it shrinks to the noise, so later iterations need longer averaging: ``(1, 2)``
+            averages twice as long from iteration 1 on. The plant side decides what the hint means (the kite
+            flies ``n_laps * request.averaging / averaging`` laps).
         structure_check_every: measured structure check (issue #14 item 2, ``docs/gma.md``): every this many
             iterations (at ``k = 0, N, 2N, ...``) one extra experiment along each direction the gradient
             estimator leaves to the model (for a :class:`~kite_rto.gma.DirectionalGradient`: the complement of
@@ -211,8 +224,10 @@ class GMASettings:
     model_secant: bool = False
     model_secant_constraints: bool = True
     model_secant_within: float = math.inf
+    alternate_within: float = math.inf
     settle_time: float = 0.0
     averaging: float = 1.0
+    averaging_schedule: tuple = ()
     structure_check_every: int = 0
     structure_stall: float = 0.0
     structure_step: float = 0.1
@@ -261,8 +276,17 @@ class GMASettings:
         _check_bool("model_secant", self.model_secant)
         _check_bool("model_secant_constraints", self.model_secant_constraints)
         _check("model_secant_within", self.model_secant_within, 0.0, None, low_open=True, inf_ok=True)
+        _check("alternate_within", self.alternate_within, 0.0, None, low_open=True, inf_ok=True)
         _check("settle_time", self.settle_time, 0.0, None)
         _check("averaging", self.averaging, 0.0, None, low_open=True)
+        try:
+            sched = np.asarray(self.averaging_schedule, dtype=float)
+        except (TypeError, ValueError):
+            sched = None
+        if sched is None or sched.ndim != 1 or not np.all(np.isfinite(sched)) or np.any(sched <= 0):
+            raise ValueError(f"GMASettings.averaging_schedule={self.averaging_schedule!r}: expected a sequence of "
+                             f"finite multipliers > 0 (empty = constant averaging)")
+        self.averaging_schedule = tuple(float(x) for x in sched)
         _check_int("structure_check_every", self.structure_check_every, 0, " (0 = off)")
         _check("structure_stall", self.structure_stall, 0.0, None)
         _check("structure_step", self.structure_step, 0.0, 1.0, low_open=True)
@@ -289,6 +313,11 @@ class GMASettings:
         if np.any(np.asarray(self.trust_radius, dtype=float) < self.trust_radius_min):
             raise ValueError(f"GMASettings.trust_radius_min={self.trust_radius_min!r}: expected "
                              f"<= trust_radius={self.trust_radius!r}")
+
+    def averaging_at(self, k: int) -> float:
+        """The averaging hint of iteration ``k``'s requests: ``averaging`` times the schedule's multiplier."""
+        sched = tuple(self.averaging_schedule)
+        return self.averaging * (float(sched[min(k, len(sched) - 1)]) if sched else 1.0)
 
     @property
     def structure_check(self) -> bool:

@@ -167,14 +167,23 @@ class ExperimentEvaluator:
         self.wind_estimate = math.nan     # the source's reference wind at z_ref for the last measurement, m/s
         self.laps = laps or LapDetector()
         self.c = None
+        self.n_laps = self.spec.n_laps
+        self.max_duration = self.spec.max_duration
         self.t_start = math.nan
         self.active = False
         self._crashes = None
         self._kept: list[LapStats] = []
         self._seen = 0
 
-    def start(self, t: float, c=None) -> None:
-        """Begin an experiment at time ``t`` (s), the moment setpoints ``c`` (rad, optional) are applied."""
+    def start(self, t: float, c=None, n_laps: int | None = None) -> None:
+        """Begin an experiment at time ``t`` (s), the moment setpoints ``c`` (rad, optional) are applied; it averages
+        ``n_laps`` whole laps (default the spec's), with ``max_duration`` scaled by ``n_laps`` over the spec's."""
+        if n_laps is None:
+            n_laps = self.spec.n_laps
+        if isinstance(n_laps, bool) or not isinstance(n_laps, (int, np.integer)) or n_laps < 1:
+            raise ValueError(f"ExperimentEvaluator.start: n_laps = {n_laps!r}: expected an integer >= 1")
+        self.n_laps = int(n_laps)
+        self.max_duration = self.spec.max_duration * max(1.0, self.n_laps / self.spec.n_laps)
         self.c = None if c is None else np.asarray(c, dtype=float).copy()
         self.t_start = float(t)
         self.active = True
@@ -199,9 +208,9 @@ class ExperimentEvaluator:
             self._seen += 1
             if self._seen > sp.settle_laps:
                 self._kept.append(lap)
-                if len(self._kept) >= sp.n_laps:
+                if len(self._kept) >= self.n_laps:
                     return self._finish(m.t)
-        if m.t - self.t_start >= sp.max_duration:
+        if m.t - self.t_start >= self.max_duration:
             return self._finish(m.t, timed_out=True)
         return None
 

@@ -172,7 +172,7 @@ class OptimizerRun:
             if self.session.request is None:
                 self.setpoints(self.session.start(m.t))
             else:                                   # plant restart: same request, measured again
-                self.session.evaluator.start(m.t, self.session.c)
+                self.session.restart(m.t)
             self.phase = "experiment"
             return
         request, repeats = self.session.request, self.session.repeats
@@ -198,7 +198,7 @@ class OptimizerRun:
         elif new is not None:
             self.setpoints(new)
             if restart and not self.done:
-                self.session.evaluator.start(t, self.session.c)
+                self.session.restart(t)
 
     # ----------------------------------------------------------------- operator
     def pause(self) -> None:

@@ -52,7 +52,8 @@ class RTOSession:
 
     def __init__(self, gma: GMA, spec: ExperimentSpec | None = None, max_repeats: int = 3):
         self.gma = gma
-        self.evaluator = ExperimentEvaluator(spec or ExperimentSpec())
+        self.spec = spec or ExperimentSpec()
+        self.evaluator = ExperimentEvaluator(self.spec)
         self.max_repeats = int(max_repeats)
         self.request = None
         self.repeats = 0
@@ -84,8 +85,21 @@ class RTOSession:
         """Begin (or resume) with GMA's next request at time ``t`` s; returns the setpoints to apply."""
         self.request = self.gma.next_request()
         self.repeats = 0
-        self.evaluator.start(t, self.c)
+        self.restart(t)
         return self.c
+
+    def restart(self, t: float) -> None:
+        """Measure the open request's experiment again from time ``t`` s (same setpoints and laps; the data so far
+        is discarded): after a crash, a plant restart or setpoints that were held."""
+        self.evaluator.start(t, self.c, self._laps())
+
+    def _laps(self) -> int | None:
+        """Laps the open request averages: the spec's ``n_laps`` scaled by the request's averaging hint over GMA's
+        ``averaging`` setting (``GMASettings.averaging_schedule``), at least 1; None without a request."""
+        if self.request is None:
+            return None
+        ratio = self.request.averaging / self.gma.settings.averaging
+        return max(1, int(round(self.spec.n_laps * ratio)))
 
     def on_measurement(self, m) -> np.ndarray | None:
         """Feed one plant measurement; returns new setpoints (rad, (3,)) when they must change, else None.
@@ -99,7 +113,7 @@ class RTOSession:
             return None
         if not out.valid and self.repeats < self.max_repeats:
             self.repeats += 1
-            self.evaluator.start(m.t, self.c)
+            self.restart(m.t)
             return self.c
         if not out.valid:
             self.stop(f"experiment {self.request.request_id} invalid after {self.repeats} repeats")

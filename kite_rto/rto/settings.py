@@ -63,7 +63,12 @@ class KiteRTOSettings:
         fd_step: finite-difference step per shape coordinate, relative to the box width, in (0, 1]; for
             ``"directional"`` the first value is the step along each privileged direction (box widths).
         fd_alternate: perturb backwards in odd iterations (``alternate`` of the directional and forward
-            strategies), so that the modifier filter averages forward and backward quotients.
+            strategies), so that the modifier filter averages forward and backward quotients (with
+            ``gma.alternate_within``: counted from the last long step).
+        fd_reflect: with ``fd_alternate`` and ``"directional"``: a backward iteration reflects the forward
+            perturbations through ``c_k`` in the setpoints where that stays in the box (``reflect`` of
+            :class:`~kite_rto.gma.DirectionalGradient`), so that a direction mixing theta_0 held at its bound with
+            free setpoints still changes side in the free ones.
         n_directions: privileged directions of ``"directional"`` (1 to 3; at most the coordinates not held at a
             robustly active bound, none under the default prior).
         uncertainty: the model-parameter deviations that define the privileged directions.
@@ -83,6 +88,7 @@ class KiteRTOSettings:
     gradient: str = "directional"
     fd_step: tuple = (0.5, 0.5, 0.5)
     fd_alternate: bool = False
+    fd_reflect: bool = False
     n_directions: int = 3
     uncertainty: ModelUncertainty = field(default_factory=ModelUncertainty)
     gma: GMASettings = field(default_factory=default_gma_settings)
@@ -99,6 +105,8 @@ class KiteRTOSettings:
             raise ValueError(f"{n}.fd_step = {self.fd_step!r}: expected 1 or 3 values in (0, 1]")
         if not isinstance(self.fd_alternate, bool):
             raise ValueError(f"{n}.fd_alternate = {self.fd_alternate!r}: expected True or False")
+        if not isinstance(self.fd_reflect, bool):
+            raise ValueError(f"{n}.fd_reflect = {self.fd_reflect!r}: expected True or False")
         if not isinstance(self.gma, GMASettings):
             raise ValueError(f"{n}.gma = {self.gma!r}: expected a GMASettings")
         if isinstance(self.n_directions, bool) or self.n_directions not in (1, 2, 3):
@@ -137,7 +145,7 @@ class KiteRTOSettings:
             if directions is None:
                 raise ValueError("KiteRTOSettings.gradient_estimator: 'directional' needs the privileged directions")
             return DirectionalGradient(directions, step=float(np.ravel(self.fd_step)[0]), reuse=False,
-                                       alternate=self.fd_alternate)
+                                       alternate=self.fd_alternate, reflect=self.fd_reflect)
         alternate = self.fd_alternate and self.gradient != "central"
         if self.gradient == "least_squares":
             return LeastSquaresGradient(FiniteDifferenceGradient(steps, alternate=alternate), radius=2.0 * steps,
