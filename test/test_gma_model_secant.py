@@ -159,3 +159,62 @@ def test_secant_within_corrects_only_after_a_short_step_and_still_reaches_the_pl
 def test_secant_within_must_be_positive(bad):
     with pytest.raises(ValueError, match="model_secant_within"):
         GMASettings(model_secant_within=bad)
+
+
+def test_constraints_only_keeps_the_plant_cost_quotients():
+    """``model_secant_cost=False``: the constraints' Jacobian gets the model's truncation correction, the cost
+    gradient stays the plant's difference quotient (for a model whose cost curves unlike the plant's)."""
+    fd = FiniteDifferenceGradient(0.5)
+    c_k = np.zeros(2)
+
+    def values(c):
+        return float(c @ c), np.array([c[0] ** 2])
+
+    def pt(c):
+        phi, g = values(c)
+        return PlantPoint(np.asarray(c, float), phi, g, 0.01)
+    new = [pt(p) for p in fd.plan(c_k, -np.ones(2), np.ones(2))]
+    plant_est = fd.estimate(c_k, pt(c_k), new)
+    m = type("M", (), {"grad_phi": np.zeros(2), "jac_g": np.zeros((1, 2))})()
+    out, note = model_secant_estimate(fd, plant_est, c_k, pt(c_k), new, [], m, values, cost=False)
+    np.testing.assert_allclose(out.cost, plant_est.cost)
+    np.testing.assert_allclose(out.constraints, [[0.0, 0.0]], atol=1e-12)
+    assert "constraints only" in note
+
+
+def curved_model():
+    u = ca.SX.sym("u", 2)
+    return ModelProblem(u=u, cost=-(u[0] + u[1]), constraints=u[0] ** 2 + u[1] ** 2 - 4, outputs=u, lbu=-5, ubu=5,
+                        u0=[0, 0], c_lb=[-2, -2], c_ub=[1.7, 1.7], name="curved_constraint")
+
+
+def curved_plant(c):
+    from kite_rto.gma import ExperimentResult
+    g = c[0] ** 2 + c[1] ** 2 - 4 + 0.3 * c[0] + 0.2 * c[1] - 0.3
+    return ExperimentResult("", -(c[0] + c[1]), [g], cost_std=1e-3, constraints_std=[1e-3])
+
+
+@pytest.mark.parametrize("secant", [False, True])
+def test_the_constraint_secant_keeps_each_step_on_the_plant_constraint(secant):
+    """The constraint curves in the model as in the plant (a circle; the plant adds a linear term). From (1.2, 0)
+    the perturbation of 0.5 in c[0] leaves the box and is taken backwards: the plant's backward quotient
+    underestimates how fast the constraint grows forward, and the second iterate oversteps it by 0.135. With the
+    model's secant on the constraint only (``model_secant_cost=False``) the quotient's error cancels, and every
+    iterate lands on the plant constraint; both end at the same point."""
+    s = GMASettings(filter_gain=1.0, trust_radius=1.0, model_secant=secant, model_secant_cost=False)
+    gma = GMA(curved_model(), s, DirectionalGradient(np.eye(2), step=0.5, reuse=False), c0=[1.2, 0.0])
+    hist = run_offline(gma, curved_plant, 8)
+    g = [curved_plant(r.c_next).constraints[0] for r in hist.iterations]
+    if secant:
+        assert max(g) < 1e-6, g
+        assert all("constraints only" in " ".join(r.notes) for r in hist.iterations)
+    else:
+        assert max(g) > 0.1, g
+    np.testing.assert_allclose(gma.c, [1.3218, 1.3718], atol=1e-3)
+
+
+def test_a_model_secant_correcting_nothing_is_refused():
+    with pytest.raises(ValueError, match="model_secant_cost=False and model_secant_constraints=False"):
+        GMASettings(model_secant=True, model_secant_cost=False, model_secant_constraints=False)
+    with pytest.raises(ValueError, match="model_secant_cost='no': expected True or False"):
+        GMASettings(model_secant_cost="no")

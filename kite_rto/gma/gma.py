@@ -476,7 +476,7 @@ class GMA:
             return est
         est, note = model_secant_estimate(self.gradient, est, c_k, nominal, new, past, model,
                                           lambda c: self._model_values(c, model.u),
-                                          self.settings.model_secant_constraints)
+                                          self.settings.model_secant_constraints, self.settings.model_secant_cost)
         est.notes = "; ".join(n for n in (est.notes, note) if n)
         return est
 

@@ -64,7 +64,8 @@ class ModelPoint:
 
 def model_secant_estimate(estimator: GradientEstimator, plant: GradientEstimate, c_k, nominal: PlantPoint,
                           new: Sequence[PlantPoint], past: Sequence[PlantPoint], model,
-                          evaluate: Callable[[np.ndarray], tuple], constraints: bool = True) -> tuple:
+                          evaluate: Callable[[np.ndarray], tuple], constraints: bool = True,
+                          cost: bool = True) -> tuple:
     """The plant estimate ``plant`` corrected by the model's truncation error (module docstring).
 
     Args:
@@ -77,6 +78,7 @@ def model_secant_estimate(estimator: GradientEstimator, plant: GradientEstimate,
         evaluate: ``c -> (phi_hat, g_hat)`` of the model (NaN where it cannot realize ``c``).
         constraints: correct the constraints' Jacobian too (False: only the cost gradient; the constraints keep
             the plant's quotients).
+        cost: correct the cost gradient (False: only the constraints; the cost keeps the plant's quotients).
 
     Returns ``(estimate, note)``: ``plant`` with ``grad phi_hat + secant_p - secant_hat`` (constraints likewise),
     same quality and standard deviations; ``plant`` itself when the model's secant is not finite (the note says
@@ -90,13 +92,15 @@ def model_secant_estimate(estimator: GradientEstimator, plant: GradientEstimate,
     n_c = np.size(c_k)
     g_phi = np.asarray(model.grad_phi, float).ravel()
     j_g = np.asarray(model.jac_g, float).reshape(-1, n_c)
-    cost = plant.cost - own.cost + g_phi
+    grad = plant.cost - own.cost + g_phi if cost else np.asarray(plant.cost, float)
     cons = plant.constraints.reshape(j_g.shape)
     if constraints:
         cons = cons - own.constraints.reshape(j_g.shape) + j_g
-    if not (np.all(np.isfinite(cost)) and np.all(np.isfinite(cons))):
+    if not (np.all(np.isfinite(grad)) and np.all(np.isfinite(cons))):
         return plant, "model secant not finite: the plant's difference quotients used as they are"
     diff = g_phi - own.cost
-    return (GradientEstimate(cost, cons, plant.quality, plant.cost_std, plant.method, plant.notes,
-                             plant.displacements),
-            f"model secant: truncation correction {np.round(diff, 6).tolist()} on the cost gradient")
+    note = (f"model secant: truncation correction {np.round(diff, 6).tolist()} on the cost gradient" if cost else
+            f"model secant: truncation correction on the constraints only, "
+            f"{np.round(j_g - own.constraints.reshape(j_g.shape), 6).tolist()}")
+    return (GradientEstimate(grad, cons, plant.quality, plant.cost_std, plant.method, plant.notes,
+                             plant.displacements), note)

@@ -129,6 +129,8 @@ class GMASettings:
             plant-model curvature mismatch; one model solve per point used. Off by default.
         model_secant_constraints: with ``model_secant``, correct the constraints' gradient modifiers too (False:
             the cost's only, the constraints keep ``secant_p - grad g_hat``).
+        model_secant_cost: with ``model_secant``, correct the cost gradient (False: only the constraints' Jacobian;
+            the cost keeps the plant's quotients, for a model whose cost curves unlike the plant's).
         model_secant_within: with ``model_secant``, correct only in iterations whose operating point the previous
             iteration reached with a step of at most this length (largest entry, relative to the setpoint box
             width; ``> 0``); ``inf`` (default) = every iteration, from ``k = 0``. With a finite value iteration 0,
@@ -223,6 +225,7 @@ class GMASettings:
     model_point: str = "consistent"
     model_secant: bool = False
     model_secant_constraints: bool = True
+    model_secant_cost: bool = True
     model_secant_within: float = math.inf
     alternate_within: float = math.inf
     settle_time: float = 0.0
@@ -275,6 +278,10 @@ class GMASettings:
                              f"'realization'")
         _check_bool("model_secant", self.model_secant)
         _check_bool("model_secant_constraints", self.model_secant_constraints)
+        _check_bool("model_secant_cost", self.model_secant_cost)
+        if self.model_secant and not (self.model_secant_cost or self.model_secant_constraints):
+            raise ValueError("GMASettings.model_secant=True with model_secant_cost=False and "
+                             "model_secant_constraints=False: expected at least one of them True")
         _check("model_secant_within", self.model_secant_within, 0.0, None, low_open=True, inf_ok=True)
         _check("alternate_within", self.alternate_within, 0.0, None, low_open=True, inf_ok=True)
         _check("settle_time", self.settle_time, 0.0, None)

@@ -60,6 +60,9 @@ PARAMS = (
     ParamSpec("model_secant", _S.gma.model_secant, "GMA gradient modifiers from the model's own difference "
               "quotients over the flown points (cancels the finite differences' truncation error up to the "
               "plant-model curvature mismatch; false: plant quotient minus the model's gradient)"),
+    ParamSpec("model_secant_cost", _S.gma.model_secant_cost, "with model_secant: correct the cost gradient too "
+              "(false: only the altitude constraint's, whose model is the reference figure-eight's geometry; the cost "
+              "keeps the plant's quotients)"),
     ParamSpec("altitude_constraint", _S.altitude, "what the model's altitude constraint bounds: the lowest point "
               "of the reference figure-eight of the lap's setpoints (reference: a function of the setpoints alone, "
               "the path controller's tracking error left to GMA's modifiers) or of the model's own free lap (lap)",
@@ -125,7 +128,8 @@ def settings_from_params(v: dict) -> KiteRTOSettings:
         return replace(_S, experiment=spec, box=_shape_box(v), gradient=v["gradient"],
                        n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3, altitude=v["altitude_constraint"]
                        ).with_gma(filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
-                                  modifier_drift=drift, model_secant=v["model_secant"], trust_radius=v["trust_radius"],
+                                  modifier_drift=drift, model_secant=v["model_secant"],
+                                  model_secant_cost=v["model_secant_cost"], trust_radius=v["trust_radius"],
                                   # the altitude's own noise filter is part of the noise-matched one
                                   constraint_drift=None if drift is None else _S.gma.constraint_drift)
     except ValueError as err:

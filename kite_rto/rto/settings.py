@@ -13,6 +13,10 @@ gain of its own (``constraint_drift`` 20), so the modified problem and the safe 
 is sized so that the altitude constraint, predicted from its measured value and gradient with 2 standard
 deviations and a curvature bound of 20 m per squared box width learned upwards from steps of at least 0.1 box
 widths, stays within 1 m (safe steps, :mod:`~kite_rto.gma.safety`; a cut step leaves the trust region as it is).
+The altitude constraint's gradient modifier comes from the model's own quotients over the flown points
+(``model_secant`` on the constraints only): the model's constraint is the reference figure-eight's geometry, so its
+quotients carry the same truncation error as the plant's and the difference cancels it, while the cost keeps the
+plant's quotients (on the tuning set's seeds 0-5 no iterate below h_min - 2 m in 24 runs against 3 of 24).
 Full steps (filter gain 1) inside a trust region of 0.7 box widths keep the first iteration's large correction.
 The altitude back-off is 3 m: 6 m cost about 1 % where the constraint binds hard (h_min 115 m). The model's
 altitude constraint bounds the reference figure-eight of the lap's setpoints (``altitude = "reference"``), and in
@@ -44,10 +48,12 @@ def default_gma_settings() -> GMASettings:
     squared box width; the fixed filter 0.5 where an estimate has no standard deviation), the altitude's gradient
     modifier filtered by its own noise (drift bound 20 m per squared box width), 3 m altitude back-off, safe steps
     (curvature bound 20 m per squared box width learned from steps of at least 0.1 box widths, 2 standard
-    deviations, 1 m tolerance; a cut step does not shrink the trust region), ``tol_c`` 1e-3."""
+    deviations, 1 m tolerance; a cut step does not shrink the trust region), the constraints' gradient modifiers from
+    the model's secant (``model_secant``, ``model_secant_cost`` False), ``tol_c`` 1e-3."""
     return GMASettings(filter_gain=1.0, modifier_filter=0.5, modifier_drift=5.0, constraint_drift=20.0,
                        trust_radius=0.7, trust_radius_min=0.05, backoff=3.0, safe_curvature=20.0, safe_sigma=2.0,
-                       safe_tolerance=1.0, safe_shrink=False, safe_adapt_min_step=0.1, tol_c=1e-3)
+                       safe_tolerance=1.0, safe_shrink=False, safe_adapt_min_step=0.1, model_secant=True,
+                       model_secant_cost=False, tol_c=1e-3)
 
 
 @dataclass(frozen=True)
