@@ -106,13 +106,13 @@ def test_bad_setting_is_named():
         GMASettings(model_secant="yes")
 
 
-def test_cost_only_keeps_the_plant_constraint_quotients():
-    """``model_secant_constraints=False``: the cost gradient gets the model's truncation correction, the constraints'
-    Jacobian stays the plant's difference quotient."""
+def curved_quotients():
+    """Forward differences of 0.5 at 0 of a curved cost ``c^T c`` and constraint ``c_0^2`` (the model's gradients at
+    0 are zero for both): ``(plant estimate, correct(**options) -> model_secant_estimate(...))``."""
     fd = FiniteDifferenceGradient(0.5)
     c_k = np.zeros(2)
 
-    def values(c):             # curved cost and constraint; the model's gradient at 0 is zero for both
+    def values(c):
         return float(c @ c), np.array([c[0] ** 2])
 
     def pt(c):
@@ -120,10 +120,17 @@ def test_cost_only_keeps_the_plant_constraint_quotients():
         return PlantPoint(np.asarray(c, float), phi, g, 0.01)
     new = [pt(p) for p in fd.plan(c_k, -np.ones(2), np.ones(2))]
     plant_est = fd.estimate(c_k, pt(c_k), new)
-    np.testing.assert_allclose(plant_est.cost, [0.5, 0.5])                 # the secant, h f''/2
     m = type("M", (), {"grad_phi": np.zeros(2), "jac_g": np.zeros((1, 2))})()
-    full, _ = model_secant_estimate(fd, plant_est, c_k, pt(c_k), new, [], m, values)
-    cost_only, _ = model_secant_estimate(fd, plant_est, c_k, pt(c_k), new, [], m, values, constraints=False)
+    return plant_est, lambda **kw: model_secant_estimate(fd, plant_est, c_k, pt(c_k), new, [], m, values, **kw)
+
+
+def test_cost_only_keeps_the_plant_constraint_quotients():
+    """``model_secant_constraints=False``: the cost gradient gets the model's truncation correction, the constraints'
+    Jacobian stays the plant's difference quotient."""
+    plant_est, correct = curved_quotients()
+    np.testing.assert_allclose(plant_est.cost, [0.5, 0.5])                 # the secant, h f''/2
+    full, _ = correct()
+    cost_only, _ = correct(constraints=False)
     np.testing.assert_allclose(full.cost, [0.0, 0.0], atol=1e-12)
     np.testing.assert_allclose(full.constraints, [[0.0, 0.0]], atol=1e-12)
     np.testing.assert_allclose(cost_only.cost, [0.0, 0.0], atol=1e-12)
@@ -164,19 +171,8 @@ def test_secant_within_must_be_positive(bad):
 def test_constraints_only_keeps_the_plant_cost_quotients():
     """``model_secant_cost=False``: the constraints' Jacobian gets the model's truncation correction, the cost
     gradient stays the plant's difference quotient (for a model whose cost curves unlike the plant's)."""
-    fd = FiniteDifferenceGradient(0.5)
-    c_k = np.zeros(2)
-
-    def values(c):
-        return float(c @ c), np.array([c[0] ** 2])
-
-    def pt(c):
-        phi, g = values(c)
-        return PlantPoint(np.asarray(c, float), phi, g, 0.01)
-    new = [pt(p) for p in fd.plan(c_k, -np.ones(2), np.ones(2))]
-    plant_est = fd.estimate(c_k, pt(c_k), new)
-    m = type("M", (), {"grad_phi": np.zeros(2), "jac_g": np.zeros((1, 2))})()
-    out, note = model_secant_estimate(fd, plant_est, c_k, pt(c_k), new, [], m, values, cost=False)
+    plant_est, correct = curved_quotients()
+    out, note = correct(cost=False)
     np.testing.assert_allclose(out.cost, plant_est.cost)
     np.testing.assert_allclose(out.constraints, [[0.0, 0.0]], atol=1e-12)
     assert "constraints only" in note
