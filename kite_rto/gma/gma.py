@@ -265,10 +265,15 @@ class GMA:
             return self._k
         n = 0
         for rec in reversed(self.history.iterations):
-            if float(np.max(np.abs(rec.step) / self._width)) > within:
+            if self._step_widths(rec) > within:
                 break
             n += 1
         return n
+
+    def _step_widths(self, record: IterationRecord) -> float:
+        """The largest entry of ``record``'s step, in box widths (how ``alternate_within``, ``structure_stall`` and
+        ``model_secant_within`` measure a step)."""
+        return float(np.max(np.abs(record.step) / self._width))
 
     def _excluded(self) -> np.ndarray:
         """(n_c, m) the directions the gradient estimator leaves to the model (none unless directional)."""
@@ -290,7 +295,7 @@ class GMA:
         """The last completed iteration's step was at most ``structure_stall`` box widths in every setpoint."""
         s, recs = self.settings, self.history.iterations
         return bool(s.structure_stall > 0 and recs
-                    and np.all(np.abs(recs[-1].step) <= s.structure_stall * self._width))
+                    and self._step_widths(recs[-1]) <= s.structure_stall)
 
     def plan_at(self, c) -> list[ExperimentRequest]:
         """An operator's operating point: the requests the open iteration ``k`` would have at ``c`` (n_c,), inside
@@ -487,7 +492,7 @@ class GMA:
         if math.isinf(within):
             return True
         its = self.history.iterations
-        return bool(its) and float(np.max(np.abs(its[-1].step) / self._width)) <= within
+        return bool(its) and self._step_widths(its[-1]) <= within
 
     def _model_values(self, c, x0) -> tuple:
         """``(phi_hat, g_hat)`` of the model's realization of ``c`` (``min phi s.t. y(u) = c``, started from

@@ -323,8 +323,8 @@ class GMASettings:
 
     def averaging_at(self, k: int) -> float:
         """The averaging hint of iteration ``k``'s requests: ``averaging`` times the schedule's multiplier."""
-        sched = tuple(self.averaging_schedule)
-        return self.averaging * (float(sched[min(k, len(sched) - 1)]) if sched else 1.0)
+        sched = self.averaging_schedule
+        return self.averaging * (sched[min(k, len(sched) - 1)] if sched else 1.0)
 
     @property
     def structure_check(self) -> bool:
