@@ -87,3 +87,21 @@ def test_cost_sigma_after_keeps_the_first_step():
     assert all(any(n.startswith("pessimistic cost: 2 x sigma") for n in r.notes) for r in late[1:])
     with pytest.raises(ValueError, match="cost_sigma_after=-1: expected an integer >= 0"):
         GMASettings(cost_sigma_after=-1)
+
+
+def test_cost_sigma_until_ends_the_pessimism():
+    """With cost_sigma_after = 1 and cost_sigma_until = 2 only iteration 1 is solved with the pessimistic cost:
+    iterations 0 and 2 on take the plain step from their modifiers (the filtered history they share with the
+    plain run differs from iteration 2 on, so the check is on the notes and the closed-form step of iteration 1)."""
+    recs = run(0, (1.5, 0.6), n_iter=4, cost_sigma=2.0, cost_sigma_after=1, cost_sigma_until=2)
+    marked = [any(n.startswith("pessimistic cost: 2 x sigma") for n in r.notes) for r in recs]
+    assert marked == [False, True, False, False]
+    plain = run(0, (1.5, 0.6), n_iter=2)
+    np.testing.assert_allclose(recs[0].c_next, plain[0].c_next, atol=1e-6)
+    # iteration 1: the same modifiers as the plain run's, a step shortened by the pessimism in every setpoint
+    np.testing.assert_allclose(recs[1].lam, plain[1].lam, atol=1e-9)
+    assert np.all(np.abs(recs[1].step) <= np.abs(plain[1].step) + 1e-9)
+    assert np.linalg.norm(recs[1].step) < np.linalg.norm(plain[1].step)
+    for bad in (1, 0):
+        with pytest.raises(ValueError, match=f"cost_sigma_until={bad}: expected an integer >= 2"):
+            GMASettings(cost_sigma_after=1, cost_sigma_until=bad)

@@ -665,7 +665,8 @@ class GMA:
         if pr.n_g and s.backoff_std_factor > 0 and nominal.constraints_std is not None:
             mods = replace(mods, backoff=mods.backoff + s.backoff_std_factor * nominal.constraints_std)
         pessimism = None
-        if s.cost_sigma > 0 and self._k >= s.cost_sigma_after:
+        if s.cost_sigma > 0 and s.cost_sigma_after <= self._k and (s.cost_sigma_until is None
+                                                                  or self._k < s.cost_sigma_until):
             pessimism = s.cost_sigma * np.nan_to_num(spread, nan=0.0, posinf=0.0)
             notes.append(f"pessimistic cost: {s.cost_sigma:g} x sigma {np.round(spread, 4).tolist()}")
         res = self.modified_nlp.solve(mods, radius=radius_abs, convexification=self._q,

@@ -92,6 +92,10 @@ class GMASettings:
         cost_sigma_after: iterations ``k < cost_sigma_after`` solve without the pessimistic cost (integer
             ``>= 0``; 0 = from the first). 1 keeps the first step, from the model optimum on a single gradient
             estimate, what it is without it, and makes the pessimism apply once the filter has something to average.
+        cost_sigma_until: iterations ``k >= cost_sigma_until`` solve without the pessimistic cost again (integer
+            ``> cost_sigma_after``); ``None`` (default) = every iteration from ``cost_sigma_after`` on. With
+            ``cost_sigma_after = 1`` and ``cost_sigma_until = 2`` only the step from iteration 1 is pessimistic:
+            the one that follows a long first step on the first gradient measured at the new point.
         trust_radius: initial trust-region half-width of the box ``|y(u) - c_k| <= Delta`` imposed in the
             modified problem, relative to the setpoint box width; ``> 0``, ``inf`` disables the trust region.
         trust_adapt: adapt the trust radius per setpoint: shrink it by ``trust_shrink`` when the step in that
@@ -210,6 +214,7 @@ class GMASettings:
     constraint_drift: Scalar | None = None
     cost_sigma: float = 0.0
     cost_sigma_after: int = 0
+    cost_sigma_until: int | None = None
     trust_radius: Scalar = 0.25
     trust_adapt: bool = True
     trust_shrink: float = 0.5
@@ -315,6 +320,8 @@ class GMASettings:
         _check_int("max_repeats_noise", self.max_repeats_noise, 0, " (0 = off)")
         _check_int("max_ipopt_iter", self.max_ipopt_iter, 1)
         _check_int("cost_sigma_after", self.cost_sigma_after, 0)
+        if self.cost_sigma_until is not None:
+            _check_int("cost_sigma_until", self.cost_sigma_until, self.cost_sigma_after + 1)
         if not isinstance(self.ipopt_options, dict):
             raise ValueError(f"GMASettings.ipopt_options={self.ipopt_options!r}: expected a dict")
         if np.any(np.asarray(self.trust_radius, dtype=float) < self.trust_radius_min):
