@@ -110,6 +110,9 @@ def test_lockstep_waits_for_a_pilot_in_the_graph_and_flies_neutral_once_none_is(
     probe.node.create_subscription(JointState, "/kite/state", states.append, RELIABLE_10)
     try:
         assert probe.spin_until(lambda: states, 30.0)
+        # the one answer must not go out before the plant's steering subscription has matched this writer
+        # (volatile durability: a command published earlier is lost, and on a busy machine discovery lags)
+        assert probe.spin_until(lambda: steer.get_subscription_count() > 0, 30.0)
         cmd = JointState(name=["delta"], position=[0.0])
         cmd.header.stamp = states[0].header.stamp
         steer.publish(cmd)                          # one answer, then silence from a writer in the graph
