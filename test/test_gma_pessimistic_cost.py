@@ -91,8 +91,9 @@ def test_cost_sigma_after_keeps_the_first_step():
 
 def test_cost_sigma_until_ends_the_pessimism():
     """With cost_sigma_after = 1 and cost_sigma_until = 2 only iteration 1 is solved with the pessimistic cost:
-    iterations 0 and 2 on take the plain step from their modifiers (the filtered history they share with the
-    plain run differs from iteration 2 on, so the check is on the notes and the closed-form step of iteration 1)."""
+    iterations 0 and 2 on take the plain step from their modifiers. The run leaves the plain one's history at
+    iteration 1, so the checks are the notes, iteration 0's step (the plain one's), and iteration 1's modifiers
+    (the plain one's) with a shorter step."""
     recs = run(0, (1.5, 0.6), n_iter=4, cost_sigma=2.0, cost_sigma_after=1, cost_sigma_until=2)
     marked = [any(n.startswith("pessimistic cost: 2 x sigma") for n in r.notes) for r in recs]
     assert marked == [False, True, False, False]

@@ -9,8 +9,9 @@ experiment's observer-normalized mean scatters by 6.6-8.3 kN, comparable to the 
 so GMA averages its gradient modifiers over iterations with a gain matched to the noise
 (:mod:`~kite_rto.gma.noise_filter`, ``modifier_drift`` 15: close to 1 after a long step, the running mean at a point
 it stays at; the first iteration takes its measurement unfiltered; 15 rather than 5 forgets the modifiers measured
-far away sooner, chosen on the tuning set's seeds 0-5: no run ends below 99 % against 1 of 24); the altitude, measured to 0.1-0.3 m, gets a
-gain of its own (``constraint_drift`` 20), so the modified problem and the safe step predict it alike. Every step
+far away sooner, chosen on the tuning set's seeds 0-5: no run ends below 99 % against 1 of 24); the altitude,
+measured to 0.1-0.3 m, gets a gain of its own (``constraint_drift`` 20), so the modified problem and the safe step
+predict it alike. Every step
 is sized so that the altitude constraint, predicted from its measured value and gradient with 2 standard
 deviations and a curvature bound of 20 m per squared box width learned upwards from steps of at least 0.1 box
 widths, stays within 1 m (safe steps, :mod:`~kite_rto.gma.safety`; a cut step leaves the trust region as it is).
