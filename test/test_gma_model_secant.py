@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from kite_rto.gma import (GMA, DirectionalGradient, FiniteDifferenceGradient, GMASettings, LeastSquaresGradient,
-                          ModelProblem, PlantPoint, run_offline)
+from kite_rto.gma import (GMA, DirectionalGradient, ExperimentResult, FiniteDifferenceGradient, GMASettings,
+                          LeastSquaresGradient, ModelProblem, PlantPoint, run_offline)
 from kite_rto.gma.model_secant import ModelPoint, model_secant_estimate
 
 
@@ -185,7 +185,6 @@ def curved_model():
 
 
 def curved_plant(c):
-    from kite_rto.gma import ExperimentResult
     g = c[0] ** 2 + c[1] ** 2 - 4 + 0.3 * c[0] + 0.2 * c[1] - 0.3
     return ExperimentResult("", -(c[0] + c[1]), [g], cost_std=1e-3, constraints_std=[1e-3])
 

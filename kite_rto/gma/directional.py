@@ -59,8 +59,8 @@ class DirectionalGradient(GradientEstimator):
             through ``c_k`` and clipped to the box in every setpoint where that keeps at least half of the
             displacement, and unreflected in the others (a setpoint held at or near its bound). Without it a
             direction whose backward step leaves the box is flown forward whole, so a direction that mixes a
-            setpoint at its bound with free ones never changes side in the free ones either. Falls back to that rule when the reflected points are worse
-            conditioned than ``rcond_min``.
+            setpoint at its bound with free ones never changes side in the free ones either. Falls back to that
+            rule when the reflected points are worse conditioned than ``rcond_min``.
 
     A perturbation that would leave the setpoint box is taken backwards, and clipped to the box when that
     leaves it too (whichever keeps more of the direction). The fit always uses the setpoints actually flown.

@@ -496,7 +496,8 @@ class GMA:
 
     def _model_values(self, c, x0) -> tuple:
         """``(phi_hat, g_hat)`` of the model's realization of ``c`` (``min phi s.t. y(u) = c``, started from
-        ``x0``; the solver's remembered solution is not replaced), NaN when it fails: the model side of ``model_secant``."""
+        ``x0``; the solver's remembered solution is not replaced), NaN when it fails: the model side of
+        ``model_secant``."""
         pr = self.problem
         res = self.realization_nlp.solve(np.asarray(c, float), x0, keep=False)
         if not res.success:

@@ -73,7 +73,8 @@ class GMASettings:
             by a filter matched to the gradient noise (:mod:`~kite_rto.gma.noise_filter`): per setpoint, a
             Kalman gain from the estimates' standard deviations (pooled over the iterations) and the filtered
             modifier's variance, which grows by ``(q |step / w|)^2`` per step; ``q`` bounds the plant-model
-            curvature mismatch, cost units per squared box width. Needs the estimates' ``cost_std`` (without it the fixed filter applies).
+            curvature mismatch, cost units per squared box width. Needs the estimates' ``cost_std`` (without it
+            the fixed filter applies).
         constraint_drift: ``None`` (default): the constraint-gradient modifiers ``mu`` get the cost's gain. A
             number ``q_g >= 0`` (scalar or one per constraint) gives each constraint's ``mu`` a gain of its own
             from the same filter, fed with that constraint's noise (the gradient's standard deviation times the

@@ -11,11 +11,10 @@ so GMA averages its gradient modifiers over iterations with a gain matched to th
 it stays at; the first iteration takes its measurement unfiltered; 15 rather than 5 forgets the modifiers measured
 far away sooner, chosen on the tuning set's seeds 0-5: no run ends below 99 % against 1 of 24); the altitude,
 measured to 0.1-0.3 m, gets a gain of its own (``constraint_drift`` 20), so the modified problem and the safe step
-predict it alike. Every step
-is sized so that the altitude constraint, predicted from its measured value and gradient with 2 standard
-deviations and a curvature bound of 20 m per squared box width learned upwards from steps of at least 0.1 box
-widths, stays within 1 m (safe steps, :mod:`~kite_rto.gma.safety`; a cut step leaves the trust region as it is).
-The altitude constraint's gradient modifier comes from the model's own quotients over the flown points
+predict it alike. Every step is sized so that the altitude constraint, predicted from its measured value and gradient
+with 2 standard deviations and a curvature bound of 20 m per squared box width learned upwards from steps of at
+least 0.1 box widths, stays within 1 m (safe steps, :mod:`~kite_rto.gma.safety`; a cut step leaves the trust region
+as it is). The altitude constraint's gradient modifier comes from the model's own quotients over the flown points
 (``model_secant`` on the constraints only): the model's constraint is the reference figure-eight's geometry, so its
 quotients carry the same truncation error as the plant's and the difference cancels it, while the cost keeps the
 plant's quotients (on the tuning set's seeds 0-5 no iterate below h_min - 2 m in 24 runs against 3 of 24).
