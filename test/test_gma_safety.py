@@ -72,11 +72,26 @@ def test_observed_curvature_from_consecutive_records():
     assert observed_curvature(recs, [None, None], [1.0], 2.0, 0.6, 1).tolist() == [0.0]   # step too short
 
 
+def test_observed_curvature_from_the_steps_end():
+    """With ``both_ends`` the gradient estimated at the step's end also predicts its start: g = c^2 measured at 0
+    and 0.5, the end's gradient estimated as 3 (true 1, e.g. a secant over a long perturbation): predicted
+    g(0) = 0.25 - 1.5, measured 0, e = 1.25, curvature 2 * 1.25 / 0.25 = 10; from the start's gradient only 2."""
+    recs = [SimpleNamespace(c_k=np.array([0.0]), c_next=np.array([0.5]), constraints=np.array([0.0]),
+                            jac_constraints=np.array([[0.0]])),
+            SimpleNamespace(c_k=np.array([0.5]), c_next=np.array([0.5]), constraints=np.array([0.25]),
+                            jac_constraints=np.array([[3.0]]))]
+    np.testing.assert_allclose(observed_curvature(recs, [None, None], [1.0], 2.0, 0.01, 1), [2.0])
+    np.testing.assert_allclose(observed_curvature(recs, [None, None], [1.0], 2.0, 0.01, 1, both_ends=True), [10.0])
+    recs[1].jac_constraints = np.array([[1.0]])          # the true gradient: the start's curvature 2 again
+    np.testing.assert_allclose(observed_curvature(recs, [None, None], [1.0], 2.0, 0.01, 1, both_ends=True), [2.0])
+
+
 @pytest.mark.parametrize("field, value, expected", [
     ("safe_curvature", -1.0, r"safe_curvature=-1.0: expected every value in \[0.0, inf\]"),
     ("safe_sigma", -1.0, r"safe_sigma=-1.0"),
     ("safe_tolerance", [0.1, -0.1], r"safe_tolerance=\[0.1, -0.1\]"),
     ("safe_adapt_min_step", float("inf"), r"safe_adapt_min_step=inf"),
+    ("safe_both_ends", 1, r"safe_both_ends=1: expected True or False"),
 ])
 def test_safe_settings_are_validated(field, value, expected):
     with pytest.raises(ValueError, match=expected):

@@ -379,25 +379,14 @@ class GMA:
         prop = self._propose(mods, spread, nominal, model, est, radius_abs, notes)
         if s.structure_kkt and struct and prop.nu is not None and self._stalled():
             restored = restored + self._kkt_release(c_k, nominal, struct, prop.nu, restored, notes)
-        step = np.clip(self._K * (prop.c_star - c_k), -self._max_step, self._max_step)
-        c_next = np.clip(c_k + step, pr.c_lb, pr.c_ub)
-        step = c_next - c_k
-        unscaled, alpha = step.copy(), 1.0
-        if prop.decision is Decision.STEP and pr.n_g and s.safe_curvature is not None:
-            safe_est = est
-            if s.safe_filtered and np.all(np.isfinite(model.jac_g)):     # the modified problem's own Jacobian
-                safe_est = replace(est, constraints=np.asarray(model.jac_g, float).reshape(pr.n_g, pr.n_c)
-                                   + prop.modifiers.mu.reshape(pr.n_g, pr.n_c))
-            alpha = self._safe_alpha(step, nominal, safe_est, notes)
-            step = alpha * step
-            c_next = c_k + step
         radius_used = self._radius.copy()
-        self._adapt_trust_region(step, prop.c_star - c_k, radius_abs)
-        if alpha < 1.0 and s.safe_shrink:   # the modified problem disagrees with the measured plant: trust it less
-            self._radius = np.maximum(self._radius * s.trust_shrink, s.trust_radius_min)
-        decision, detail = prop.decision, prop.detail
-        if decision is Decision.STEP and bool(np.all(np.abs(unscaled) <= s.tol_c * self._width)):
-            decision, detail = Decision.CONVERGED, ""
+        back = self._undo_target(c_k, nominal, notes)
+        if back is not None:        # the plant measured the last step as a loss: go back, trust the model less
+            step, c_next, decision, detail = back - c_k, back, Decision.UNDONE, ""
+            self._radius = np.where(step != 0, np.maximum(self._radius * s.trust_shrink, s.trust_radius_min),
+                                    self._radius)
+        else:
+            step, c_next, decision, detail = self._step(c_k, prop, nominal, model, est, radius_abs, notes)
         rec = IterationRecord(
             k=k, c_k=c_k, cost=nominal.cost, constraints=nominal.constraints, grad_cost=est.cost,
             jac_constraints=est.constraints.reshape(pr.n_g, pr.n_c), gradient_quality=est.quality,
@@ -412,10 +401,58 @@ class GMA:
             grad_cost_std=None if est.cost_std is None else np.asarray(est.cost_std, float).copy())
         self.history.iterations.append(rec)
         self._k, self._c = k + 1, c_next
-        if decision.moved:
+        if decision.moved or decision is Decision.UNDONE:
             self._prev_step = step
         self._plan()
         return rec
+
+    def _step(self, c_k, prop: _Proposal, nominal: PlantPoint, model: ModelRealization, est: GradientEstimate,
+              radius_abs: np.ndarray, notes: list[str]) -> tuple:
+        """``(step, c_next, decision, detail)`` towards the modified problem's solution: filtered, bounded, made
+        safe (``safe_curvature``), the trust region adapted; ``CONVERGED`` when the unscaled step met ``tol_c``."""
+        pr, s = self.problem, self.settings
+        step = np.clip(self._K * (prop.c_star - c_k), -self._max_step, self._max_step)
+        c_next = np.clip(c_k + step, pr.c_lb, pr.c_ub)
+        step = c_next - c_k
+        unscaled, alpha = step.copy(), 1.0
+        if prop.decision is Decision.STEP and pr.n_g and s.safe_curvature is not None:
+            safe_est = est
+            if s.safe_filtered and np.all(np.isfinite(model.jac_g)):     # the modified problem's own Jacobian
+                safe_est = replace(est, constraints=np.asarray(model.jac_g, float).reshape(pr.n_g, pr.n_c)
+                                   + prop.modifiers.mu.reshape(pr.n_g, pr.n_c))
+            alpha = self._safe_alpha(step, nominal, safe_est, notes)
+            step = alpha * step
+            c_next = c_k + step
+        self._adapt_trust_region(step, prop.c_star - c_k, radius_abs)
+        if alpha < 1.0 and s.safe_shrink:   # the modified problem disagrees with the measured plant: trust it less
+            self._radius = np.maximum(self._radius * s.trust_shrink, s.trust_radius_min)
+        decision, detail = prop.decision, prop.detail
+        if decision is Decision.STEP and bool(np.all(np.abs(unscaled) <= s.tol_c * self._width)):
+            decision, detail = Decision.CONVERGED, ""
+        return step, c_next, decision, detail
+
+    def _undo_target(self, c_k, nominal: PlantPoint, notes: list[str]) -> np.ndarray | None:
+        """``c_{k-1}`` when the measured step test (``GMASettings.reject_sigma``) undoes the step that led to
+        ``c_k`` (noted), else ``None``: GMA's own step led there, ``c_{k-1}`` met its measured constraints, and the
+        nominal cost rose by more than ``reject_sigma`` standard errors of the difference (from the pooled noise,
+        :meth:`_pooled_cost_variance`, and each nominal experiment's averaging)."""
+        z, recs = self.settings.reject_sigma, self.history.iterations
+        if z is None or not recs:
+            return None
+        prev = recs[-1]
+        if prev.outcome is not Decision.STEP or not np.array_equal(prev.c_next, c_k) or np.any(prev.constraints > 0):
+            return None
+        lengths = {q.request_id: q.averaging for q, _ in self.history.experiments}
+        unit = self._pooled_cost_variance()
+        if unit is None:
+            return None
+        rise = nominal.cost - prev.cost
+        se = math.sqrt(unit / lengths[prev.experiment_ids[0]] + unit / self.history.pending[0].averaging)
+        if not rise > z * se:
+            return None
+        notes.append(f"step undone: the cost measured at c_k is {rise:.4g} above c_(k-1)'s ({rise / se:.3g} "
+                     f"standard errors of the difference, > {z:g})")
+        return prev.c_k.copy()
 
     def _experiments_of(self, k: int) -> list:
         """The finished ``(request, result)`` pairs of iteration ``k``, in planned order (nominal first)."""
@@ -553,7 +590,8 @@ class GMA:
             nominal.constraints_std]
         current = SimpleNamespace(c_k=self._c, c_next=self._c, constraints=nominal.constraints,
                                   jac_constraints=est.constraints)
-        seen = observed_curvature(list(recs) + [current], stds, w, s.safe_sigma, s.safe_adapt_min_step, n_g)
+        seen = observed_curvature(list(recs) + [current], stds, w, s.safe_sigma, s.safe_adapt_min_step, n_g,
+                                  s.safe_both_ends)
         M = np.maximum(per_setpoint("safe_curvature", s.safe_curvature, n_g), seen)
         tol = per_setpoint("safe_tolerance", s.safe_tolerance, n_g)
         trunc = np.zeros(n_g)
@@ -568,6 +606,14 @@ class GMA:
                          + (f"truncation bound {trunc[j]:+.4g}, " if s.safe_truncation else "")
                          + f"curvature bound {M[j]:.4g})" + ("; trust region shrunk" if s.safe_shrink else ""))
         return alpha
+
+    def _pooled_cost_variance(self) -> float | None:
+        """The variance of one experiment's cost per unit of averaging, pooled over every finished experiment
+        (``cost_std^2`` times the request's ``averaging``, averaged): a standard error from a few laps is itself
+        uncertain, and the plant's noise is taken as stationary (as the noise-matched filter does). ``None`` when
+        no experiment carried a ``cost_std``."""
+        v = [r.cost_std ** 2 * q.averaging for q, r in self.history.experiments if r.cost_std is not None]
+        return float(np.mean(v)) if v else None
 
     def _restored_column(self, dc: np.ndarray) -> np.ndarray:
         """The estimator column for a restored direction ``dc``: scaled so that its perturbation

@@ -74,6 +74,8 @@ class Decision(StrEnum):
     """Moved towards the modified problem's solution (filtered, bounded)."""
     CONVERGED = "converged"
     """Moved by less than ``tol_c``: a fixed point."""
+    UNDONE = "step undone"
+    """Went back to ``c_{k-1}``: the cost measured at ``c_k`` rose significantly (``GMASettings.reject_sigma``)."""
     HOLD_NO_REALIZATION = "hold: the model cannot realize c_k"
     """Stayed: the model has no realization of the operating point."""
     HOLD_BAD_GRADIENT = "hold: unusable gradient estimate"

@@ -77,12 +77,15 @@ def safe_fraction(g, g_std, slope, slope_std, curvature, step_sq: float, sigma: 
     return alpha, limiting
 
 
-def observed_curvature(records, stds, width, sigma: float, min_step: float, n_g: int) -> np.ndarray:
+def observed_curvature(records, stds, width, sigma: float, min_step: float, n_g: int,
+                       both_ends: bool = False) -> np.ndarray:
     """(n_g,) the largest constraint curvature (constraint units per squared box width) that consecutive
     iteration records show: for a step ``d = c_{k+1} - c_k`` of at least ``min_step`` box widths (largest
     component), ``2 (e - k s) / |d / w|^2`` with ``e = g(c_{k+1}) - g(c_k) - J_k d`` and ``s`` the standard
     deviation of the two measurements (``stds``: one (n_g,) array or ``None`` per record); 0 when no step shows
-    any."""
+    any. With ``both_ends`` also ``e = g(c_k) - g(c_{k+1}) + J_{k+1} d``, the gradient estimated at the step's end
+    predicting its start: the curvature bound holds from either end, and an estimate that extrapolates badly
+    backwards (a secant over a perturbation in a strongly curved region) is caught before its own step."""
     out = np.zeros(n_g)
     w = np.asarray(width, float)
     for i in range(len(records) - 1):
@@ -94,6 +97,9 @@ def observed_curvature(records, stds, width, sigma: float, min_step: float, n_g:
         if not np.all(np.isfinite(J)):
             continue
         e = np.asarray(cur.constraints, float) - np.asarray(prev.constraints, float) - J @ d
+        J_end = np.asarray(cur.jac_constraints, float).reshape(n_g, -1)
+        if both_ends and np.all(np.isfinite(J_end)):
+            e = np.maximum(e, np.asarray(prev.constraints, float) - np.asarray(cur.constraints, float) + J_end @ d)
         s = np.hypot(*(np.zeros(n_g) if x is None else np.asarray(x, float) for x in (stds[i], stds[i + 1])))
         out = np.maximum(out, 2.0 * (e - sigma * s) / float(np.sum((d / w) ** 2)))
     return out

@@ -97,6 +97,14 @@ class GMASettings:
             ``> cost_sigma_after``); ``None`` (default) = every iteration from ``cost_sigma_after`` on. With
             ``cost_sigma_after = 1`` and ``cost_sigma_until = 2`` only the step from iteration 1 is pessimistic:
             the one that follows a long first step on the first gradient measured at the new point.
+        reject_sigma: measured step test (issue #14 item 3, a trust region that adapts to the plant's own
+            measurements; ``docs/gma.md``, *Undoing a step*): ``None`` = off (default). A number ``z >= 0``: when the
+            nominal cost measured at ``c_k`` exceeds the one measured at ``c_{k-1}`` by more than ``z`` standard
+            errors of their difference (from the experiments' ``cost_std``, pooled over the run and scaled by each
+            request's ``averaging``; without them nothing is undone), ``c_{k-1}``'s measured constraints held
+            (``g <= 0``) and GMA's own step led from ``c_{k-1}`` to ``c_k``, the step is undone: the next operating
+            point is ``c_{k-1}`` and the trust radius shrinks by ``trust_shrink`` in the setpoints that moved. The
+            gradient measured at ``c_k`` still enters the modifiers. A step back is not tested in turn.
         trust_radius: initial trust-region half-width of the box ``|y(u) - c_k| <= Delta`` imposed in the
             modified problem, relative to the setpoint box width; ``> 0``, ``inf`` disables the trust region.
         trust_adapt: adapt the trust radius per setpoint: shrink it by ``trust_shrink`` when the step in that
@@ -194,6 +202,10 @@ class GMASettings:
             ``0.5 M |p_i|^2`` each, which move the predicted change over the step ``d = sum a_i p_i`` by up to
             ``0.5 M sum |a_i| |p_i|^2`` (``docs/gma.md``, *Safe steps*). Matters where a perturbation was taken
             on the other side of ``c_k`` than the step (at a bound) or is longer than it. Off by default.
+        safe_both_ends: the curvature bound ``M`` also learns from each past step's end: the gradient estimated at
+            ``c_{k+1}`` predicting the constraints at ``c_k`` (the bound holds from either end;
+            :func:`~kite_rto.gma.safety.observed_curvature`). A gradient whose secants over its perturbations
+            disagree with the last step's measured change then shortens its own step. Off by default.
         safe_shrink: shrink the trust radius (by ``trust_shrink``) whenever a safe step shortens the filtered
             step (True, default); False leaves the radius to ``trust_adapt``: the safe step already limits that
             step, and shrinking as well compounds, over iterations, to the smallest radius.
@@ -216,6 +228,7 @@ class GMASettings:
     cost_sigma: float = 0.0
     cost_sigma_after: int = 0
     cost_sigma_until: int | None = None
+    reject_sigma: float | None = None
     trust_radius: Scalar = 0.25
     trust_adapt: bool = True
     trust_shrink: float = 0.5
@@ -250,6 +263,7 @@ class GMASettings:
     safe_shrink: bool = True
     safe_filtered: bool = False
     safe_truncation: bool = False
+    safe_both_ends: bool = False
     noise_ratio: float = 0.5
     max_repeats_noise: int = 0
     max_ipopt_iter: int = 1000
@@ -266,6 +280,8 @@ class GMASettings:
                 raise ValueError(f"GMASettings.constraint_drift={self.constraint_drift!r} needs modifier_drift "
                                  "(the noise-matched filter); modifier_drift is None")
         _check("cost_sigma", self.cost_sigma, 0.0, None)
+        if self.reject_sigma is not None:
+            _check("reject_sigma", self.reject_sigma, 0.0, None)
         _check("trust_radius", self.trust_radius, 0.0, None, low_open=True, inf_ok=True)
         _check_bool("trust_adapt", self.trust_adapt)
         _check("trust_shrink", self.trust_shrink, 0.0, 1.0, low_open=True, high_open=True)
@@ -316,6 +332,7 @@ class GMASettings:
         _check("safe_adapt_min_step", self.safe_adapt_min_step, 0.0, None)
         _check_bool("safe_filtered", self.safe_filtered)
         _check_bool("safe_truncation", self.safe_truncation)
+        _check_bool("safe_both_ends", self.safe_both_ends)
         _check_bool("safe_shrink", self.safe_shrink)
         _check("noise_ratio", self.noise_ratio, 0.0, None, low_open=True)
         _check_int("max_repeats_noise", self.max_repeats_noise, 0, " (0 = off)")
