@@ -22,6 +22,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints
+from kite_rto.flight.sources import UNKNOWN_NODE
 from kite_rto.nodes.interface import LATCHED, stamp_to_ns
 
 from faultgraph import QUIET, Proc, decode_path, node, stop_all
@@ -249,9 +250,14 @@ def test_setpoint_source_ignores_a_foreign_publisher(probe, ros_env, request, tm
         flooded = [Setpoints.from_degrees(33.0, 46.0, 7.0).as_array(), Setpoints.from_degrees(35.0, 52.0, 8.0).as_array()]
         applied_flood = sum(any(np.allclose(p, f, atol=2e-3) for f in flooded) for p in paths)
         ignored = ctrl.matching("ignoring /rto/setpoints")
+        named = sum("/intruder" in w for w in ignored)
         row.outcome = (f"{fl['sent']} flooded messages at {fl['rate_hz']:.0f} Hz, {applied_flood} applied (paths "
-                       f"decoded: {[np.degrees(p).round(2).tolist() for p in paths]}); {len(ignored)} warnings naming /intruder; the optimizer's setpoints "
-                       "published during the flood were applied once /intruder had left (subscribed again)")
+                       f"decoded: {[np.degrees(p).round(2).tolist() for p in paths]}); {len(ignored)} warnings, "
+                       f"{named} naming /intruder (the others before discovery had named it: its gid); the optimizer's "
+                       "setpoints published during the flood were applied once /intruder had left (subscribed again)")
         row.unsafe_setpoints = 0
-        assert applied_flood == 0 and "/intruder" in ignored[0]
+        assert applied_flood == 0
+        # each warning names the foreign publisher: by node name once discovery knows it, by gid before (on a busy
+        # machine the flood can start before the controller's graph has the intruder's name)
+        assert ignored and all("/intruder" in w or (UNKNOWN_NODE in w and "gid" in w) for w in ignored), ignored
         assert np.allclose(paths[-1], new_c, atol=2e-3)
