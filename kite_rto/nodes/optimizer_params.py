@@ -31,7 +31,8 @@ PARAMS = (
               unit="iterations", runtime=True),
     ParamSpec("exit_when_done", False, "exit (code 0) once n_iter iterations are done (needs n_iter > 0)",
               runtime=True),
-    ParamSpec("n_laps", _E.n_laps, "whole laps averaged per experiment", 1, 100, unit="laps"),
+    ParamSpec("n_laps", _E.n_laps, "whole laps averaged per experiment of the first iteration; twice as many from "
+              "the second on (the kite defaults' averaging schedule)", 1, 100, unit="laps"),
     ParamSpec("settle_laps", _E.settle_laps, "whole laps dropped after a setpoint change", 0, 100, unit="laps"),
     ParamSpec("settle_time", _E.settle_time, "simulated time after a setpoint change before a lap may count "
               "(< max_duration)", 0.0, 600.0, unit="s"),
