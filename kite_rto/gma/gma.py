@@ -442,12 +442,11 @@ class GMA:
         prev = recs[-1]
         if prev.outcome is not Decision.STEP or not np.array_equal(prev.c_next, c_k) or np.any(prev.constraints > 0):
             return None
-        lengths = {q.request_id: q.averaging for q, _ in self.history.experiments}
         unit = self._pooled_cost_variance()
         if unit is None:
             return None
-        rise = nominal.cost - prev.cost
-        se = math.sqrt(unit / lengths[prev.experiment_ids[0]] + unit / self.history.pending[0].averaging)
+        rise, s = nominal.cost - prev.cost, self.settings
+        se = math.sqrt(unit / s.averaging_at(prev.k) + unit / s.averaging_at(self._k))
         if not rise > z * se:
             return None
         notes.append(f"step undone: the cost measured at c_k is {rise:.4g} above c_(k-1)'s ({rise / se:.3g} "
