@@ -6,6 +6,7 @@ import re
 import signal
 import subprocess
 import sys
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -92,18 +93,31 @@ def test_pause_hold_manual_setpoint_resume(probe, ros_env, tmp_path):
             assert (code, out) == (0, "deactivate: active -> inactive\n"), out
             assert probe.spin_until(lambda: w.status.get("lifecycle") == "inactive", 60.0)
             done_before = [q.request_id for q, _ in stored(db)[0].experiments]
+            t_frozen = w.t
         finally:
             os.killpg(plant.pid, signal.SIGCONT)
-        t_pause, n_setpoints = w.t, len(w.setpoints)
-        held = w.setpoints[-1]
+        # The setpoints held: what a subscriber joining now gets from the latched /rto/setpoints (the last message
+        # published before the pause; the probe's own list may still be short of it under load).
+        latest = []
+        probe.node.create_subscription(JointState, "/rto/setpoints", lambda m: latest.append(tuple(m.position)),
+                                       LATCHED)
+        assert probe.spin_until(lambda: latest, 60.0), "no latched /rto/setpoints"
+        held = latest[-1]
+        assert probe.spin_until(lambda: w.setpoints and w.setpoints[-1] == held, 60.0), (held, w.setpoints)
+        n_setpoints = len(w.setpoints)
+        # When the pause began, in sim time: the probe's /clock, or, if the probe had not heard the plant's clock yet
+        # (discovery under load), the first synced sample flying the held setpoints (at or before the pause).
+        assert probe.spin_until(lambda: any(c == held for _, c in w.sync), 600.0), "the held setpoints never flown"
+        t_pause = max(t_frozen, min(s for s, c in w.sync if c == held))
         assert probe.spin_until(lambda: w.t > t_pause + HOLD + 2.0, 600.0), "the lockstep loop stalled while paused"
         # /rto/sync comes on another topic than /clock: wait until the probe has heard it past the hold too
         assert probe.spin_until(lambda: w.sync and w.sync[-1][0] > t_pause + HOLD + 1.0, 600.0), "no /rto/sync"
         # every /rto/sync the probe heard over the 60 s carries the held setpoints (a busy probe may miss some; the
         # plant's clock passing t_pause + 60 s in lockstep shows that the controller got them all)
-        during = [c for s, c in w.sync if t_pause + 1.0 < s <= t_pause + HOLD]
+        during = [c for s, c in w.sync if t_pause < s <= t_pause + HOLD]
         assert during and max(s for s, _ in w.sync) > t_pause + HOLD - 1.0, "no /rto/sync while paused"
-        assert all(np.array_equal(c, held) for c in during), "the setpoints changed while paused"
+        assert all(np.array_equal(c, held) for c in during), \
+            f"the setpoints changed while paused: held {held}, heard {Counter(during)} after t = {t_pause} s"
         assert len(w.setpoints) == n_setpoints, "new setpoints while paused"
         assert [q.request_id for q, _ in stored(db)[0].experiments] == done_before, "an experiment stored while paused"
         code, out = ctl(ros_env, "setpoint", "20", "50", "7.5")    # theta_0 below the box
