@@ -383,8 +383,7 @@ class GMA:
         back = self._undo_target(c_k, nominal, notes)
         if back is not None:        # the plant measured the last step as a loss: go back, trust the model less
             step, c_next, decision, detail = back - c_k, back, Decision.UNDONE, ""
-            self._radius = np.where(step != 0, np.maximum(self._radius * s.trust_shrink, s.trust_radius_min),
-                                    self._radius)
+            self._shrink_radius(step != 0)
         else:
             step, c_next, decision, detail = self._step(c_k, prop, nominal, model, est, radius_abs, notes)
         rec = IterationRecord(
@@ -425,7 +424,7 @@ class GMA:
             c_next = c_k + step
         self._adapt_trust_region(step, prop.c_star - c_k, radius_abs)
         if alpha < 1.0 and s.safe_shrink:   # the modified problem disagrees with the measured plant: trust it less
-            self._radius = np.maximum(self._radius * s.trust_shrink, s.trust_radius_min)
+            self._shrink_radius()
         decision, detail = prop.decision, prop.detail
         if decision is Decision.STEP and bool(np.all(np.abs(unscaled) <= s.tol_c * self._width)):
             decision, detail = Decision.CONVERGED, ""
@@ -718,7 +717,7 @@ class GMA:
         res = self.modified_nlp.solve(mods, radius=radius_abs, convexification=self._q,
                                       penalty=s.constraint_penalty, x0=model.u, spread=pessimism)
         if not res.success:
-            self._radius = np.maximum(self._radius * s.trust_shrink, s.trust_radius_min)
+            self._shrink_radius()
             return replace(hold, decision=Decision.HOLD_SOLVE_FAILED, modifiers=mods, cost=res.f, status=res.status)
         self._prev_mod = replace(mods, c=c_k.copy(), eps=mods.eps.copy(), mu=mods.mu.copy(),
                                  backoff=mods.backoff.copy())
@@ -731,6 +730,12 @@ class GMA:
         return _Proposal(Decision.STEP, detail, mods, u_star, res.f, res.status, c_star,
                          np.maximum(res.lam_g[: pr.n_g], 0.0))
 
+    def _shrink_radius(self, where=True) -> None:
+        """Multiply the trust radius by ``trust_shrink`` (not below ``trust_radius_min``) in the setpoints
+        ``where`` is true (a bool or a per-setpoint mask)."""
+        s = self.settings
+        self._radius = np.where(where, np.maximum(self._radius * s.trust_shrink, s.trust_radius_min), self._radius)
+
     def _adapt_trust_region(self, step, proposed, radius_abs) -> None:
         """Per setpoint: shrink on a sign change of the step, grow when the bound was hit without one."""
         s = self.settings
@@ -738,7 +743,7 @@ class GMA:
             return
         flip = step * self._prev_step < 0
         hit = (np.abs(proposed) >= 0.999 * radius_abs) & ~flip
-        self._radius = np.where(flip, np.maximum(self._radius * s.trust_shrink, s.trust_radius_min), self._radius)
+        self._shrink_radius(flip)
         self._radius = np.where(hit, np.minimum(self._radius * s.trust_grow, self._radius0), self._radius)
 
 
