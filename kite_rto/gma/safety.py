@@ -96,10 +96,12 @@ def observed_curvature(records, stds, width, sigma: float, min_step: float, n_g:
         J = np.asarray(prev.jac_constraints, float).reshape(n_g, -1)
         if not np.all(np.isfinite(J)):
             continue
-        e = np.asarray(cur.constraints, float) - np.asarray(prev.constraints, float) - J @ d
-        J_end = np.asarray(cur.jac_constraints, float).reshape(n_g, -1)
-        if both_ends and np.all(np.isfinite(J_end)):
-            e = np.maximum(e, np.asarray(prev.constraints, float) - np.asarray(cur.constraints, float) + J_end @ d)
+        dg = np.asarray(cur.constraints, float) - np.asarray(prev.constraints, float)    # measured change
+        e = dg - J @ d
+        if both_ends:
+            J_end = np.asarray(cur.jac_constraints, float).reshape(n_g, -1)
+            if np.all(np.isfinite(J_end)):
+                e = np.maximum(e, J_end @ d - dg)
         s = np.hypot(*(np.zeros(n_g) if x is None else np.asarray(x, float) for x in (stds[i], stds[i + 1])))
         out = np.maximum(out, 2.0 * (e - sigma * s) / float(np.sum((d / w) ** 2)))
     return out
