@@ -151,13 +151,18 @@ def test_plant_defaults_are_the_plant_config_defaults():
 
 def test_optimizer_defaults_build_the_kite_defaults_and_gma_switches_reach_gma():
     """The optimizer's parameter defaults build KiteRTOSettings() back; the GMA switches land in its GMASettings
-    (modifier_drift's negative sentinel = off, model_secant)."""
+    (modifier_drift's and reject_sigma's negative sentinel = off, model_secant, the later experiments' laps factor,
+    the safe step from both ends)."""
     from kite_rto.nodes.optimizer_params import PARAMS, settings_from_params
     from kite_rto.rto.settings import KiteRTOSettings
     v = {s.name: s.default for s in PARAMS}
     assert settings_from_params(v) == KiteRTOSettings()
-    s = settings_from_params({**v, "modifier_drift": -1.0, "model_secant": not v["model_secant"]})
+    s = settings_from_params({**v, "modifier_drift": -1.0, "model_secant": not v["model_secant"], "n_laps_factor": 1.5,
+                              "reject_sigma": -1.0, "safe_both_ends": not v["safe_both_ends"]})
     assert s.gma.modifier_drift is None and s.gma.model_secant is (not v["model_secant"])
+    assert s.gma.averaging_schedule == (1.0, 1.5) and s.gma.reject_sigma is None
+    assert s.gma.safe_both_ends is (not v["safe_both_ends"])
+    assert settings_from_params({**v, "reject_sigma": 0.5}).gma.reject_sigma == 0.5
 
 
 def test_path_controller_retune():

@@ -31,8 +31,11 @@ PARAMS = (
               unit="iterations", runtime=True),
     ParamSpec("exit_when_done", False, "exit (code 0) once n_iter iterations are done (needs n_iter > 0)",
               runtime=True),
-    ParamSpec("n_laps", _E.n_laps, "whole laps averaged per experiment of the first iteration; twice as many from "
-              "the second on (the kite defaults' averaging schedule)", 1, 100, unit="laps"),
+    ParamSpec("n_laps", _E.n_laps, "whole laps averaged per experiment of the first iteration (n_laps_factor "
+              "times as many from the second on)", 1, 100, unit="laps"),
+    ParamSpec("n_laps_factor", float(_S.gma.averaging_schedule[-1]), "experiments from the second iteration on "
+              "average n_laps times this many laps, rounded (near the optimum a short experiment's gradient is as "
+              "large as its noise; 1 = as many as the first iteration's)", 1.0, 10.0, unit="dimensionless"),
     ParamSpec("settle_laps", _E.settle_laps, "whole laps dropped after a setpoint change", 0, 100, unit="laps"),
     ParamSpec("settle_time", _E.settle_time, "simulated time after a setpoint change before a lap may count "
               "(< max_duration)", 0.0, 600.0, unit="s"),
@@ -70,6 +73,13 @@ PARAMS = (
               choices=ALTITUDES),
     ParamSpec("trust_radius", _S.gma.trust_radius, "initial trust radius (not below GMA's minimum trust radius)",
               _S.gma.trust_radius_min, 10.0, unit="fraction of the box width"),
+    ParamSpec("reject_sigma", -1.0 if _S.gma.reject_sigma is None else _S.gma.reject_sigma, "GMA undoes a step "
+              "after which the measured cost rose by more than this many standard errors: back to the previous "
+              "point, the trust radius halved where the step moved (negative = never)", -1.0, 100.0,
+              unit="standard errors"),
+    ParamSpec("safe_both_ends", _S.gma.safe_both_ends, "GMA's safe step learns the altitude constraint's curvature "
+              "from both ends of each past step: the gradient at its end predicting its start too (false: from its "
+              "start only)"),
     ParamSpec("box_theta_0_deg", [round(math.degrees(v), 9) for v in _S.box.theta_0], "optimizer's theta_0 range [low, high]",
               1.0, 89.0, unit="deg"),
     ParamSpec("box_A_phi_deg", [round(math.degrees(v), 9) for v in _S.box.A_phi], "optimizer's A_phi range [low, high]",
@@ -131,6 +141,9 @@ def settings_from_params(v: dict) -> KiteRTOSettings:
                        ).with_gma(filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
                                   modifier_drift=drift, model_secant=v["model_secant"],
                                   model_secant_cost=v["model_secant_cost"], trust_radius=v["trust_radius"],
+                                  averaging_schedule=(1.0, v["n_laps_factor"]),
+                                  reject_sigma=None if v["reject_sigma"] < 0 else v["reject_sigma"],
+                                  safe_both_ends=v["safe_both_ends"],
                                   # the altitude's own noise filter is part of the noise-matched one
                                   constraint_drift=None if drift is None else _S.gma.constraint_drift)
     except ValueError as err:
