@@ -59,6 +59,11 @@ def test_parameters_and_status_answer_while_the_optimizer_builds(tmp_path, monke
         node._builder.join(300)     # its NLP build must not overlap the next test's CasADi work (not thread-safe)
         probe.executor.remove_node(node)
         node.destroy_node()
+    try:        # destroyed, it leaves no lifecycle service behind for a later optimizer's clients to find
+        lifecycle = {"/optimizer/get_state", "/optimizer/change_state"}
+        assert probe.spin_until(lambda: not lifecycle & {s for s, _ in probe.node.get_service_names_and_types()},
+                                60.0), "the destroyed optimizer left its lifecycle services on the graph"
+    finally:
         probe.close()
 
 
