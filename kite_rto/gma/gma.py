@@ -716,6 +716,8 @@ class GMA:
             notes.append(f"pessimistic cost: {s.cost_sigma:g} x sigma {np.round(spread, 4).tolist()}")
         res = self.modified_nlp.solve(mods, radius=radius_abs, convexification=self._q,
                                       penalty=s.constraint_penalty, x0=model.u, spread=pessimism)
+        if self._bound_hold_due(res):
+            res = self._hold_bounds(c_k, mods, spread, radius_abs, model, pessimism, res, notes)
         if not res.success:
             self._shrink_radius()
             return replace(hold, decision=Decision.HOLD_SOLVE_FAILED, modifiers=mods, cost=res.f, status=res.status)
@@ -729,6 +731,42 @@ class GMA:
         detail = f"trust region active on c{np.flatnonzero(at_bound).tolist()}" if at_bound.any() else ""
         return _Proposal(Decision.STEP, detail, mods, u_star, res.f, res.status, c_star,
                          np.maximum(res.lam_g[: pr.n_g], 0.0))
+
+    def _bound_hold_due(self, res) -> bool:
+        """Whether the bound test (``GMASettings.bound_sigma``) runs in this iteration (after a solved problem)."""
+        s = self.settings
+        return s.bound_sigma is not None and self._k >= s.bound_sigma_after and res.success
+
+    def _hold_bounds(self, c_k, mods: Modifiers, spread, radius_abs, model: ModelRealization, pessimism, res,
+                     notes: list[str]):
+        """The modified problem with the setpoints at a bound of the box held there (zero trust radius) where
+        holding is not measurably wrong (``GMASettings.bound_sigma``), else ``res``, the problem solved without
+        holding. Holding is wrong where the held problem's multiplier of that setpoint (the modified Lagrangian's
+        descent into the box at the held solution: the measured-KKT test at the box's bounds) exceeds
+        ``bound_sigma`` standard deviations of the filtered cost modifier (``spread``); such setpoints are
+        released and the rest solved again, once."""
+        pr, s = self.problem, self.settings
+        tol = 1e-9 * self._width
+        side = np.where(c_k >= pr.c_ub - tol, 1.0, np.where(c_k <= pr.c_lb + tol, -1.0, 0.0))
+        held = side != 0
+        limit = s.bound_sigma * np.nan_to_num(np.asarray(spread, float), nan=np.inf)
+        for _ in range(2):
+            if not held.any():
+                break
+            kept = self.modified_nlp.solve(mods, radius=np.where(held, 0.0, radius_abs), convexification=self._q,
+                                           penalty=s.constraint_penalty, x0=model.u, spread=pessimism)
+            if not kept.success:
+                break
+            inward = -side * np.asarray(kept.lam_g[pr.n_g: pr.n_g + pr.n_c], float)   # > 0: wants into the box
+            keep = held & (inward < limit)
+            if np.array_equal(keep, held):
+                notes.append(f"bound held: c{np.flatnonzero(held).tolist()} stay at their bounds (the modified "
+                             f"Lagrangian's descent into the box, {np.round(inward[held], 4).tolist()}, is below "
+                             f"{s.bound_sigma:g} standard deviations)")
+                return kept
+            held = keep
+        self.modified_nlp.last = res         # the next warm start as without the held solves
+        return res
 
     def _shrink_radius(self, where=True) -> None:
         """Multiply the trust radius by ``trust_shrink`` (not below ``trust_radius_min``) in the setpoints

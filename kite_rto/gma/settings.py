@@ -217,6 +217,16 @@ class GMASettings:
         max_repeats_noise: how many times at most each of them is flown again (their results are averaged,
             the standard errors shrink as ``1 / sqrt(n)``); integer ``>= 0``, 0 = off (default). Needs the
             results' ``cost_std``.
+        bound_sigma: leave a bound of the box only on measured evidence: ``None`` = off (default). A number
+            ``z >= 0``: from iteration ``bound_sigma_after`` on, the setpoints at a bound of the box are held there
+            (zero trust radius in them) when the held modified problem's multiplier of each (the modified
+            Lagrangian's descent into the box, constraints included) is below ``z`` standard deviations of the
+            filtered cost modifier; a setpoint above it is released and the rest solved again, once. Near an
+            optimum on or close to a bound the measured slope there is mostly noise, and a model without
+            curvature in that setpoint turns it into a step to the trust region's edge. Needs the estimates'
+            ``cost_std`` (without it nothing is held).
+        bound_sigma_after: the first iteration of ``bound_sigma`` (integer ``>= 0``): at the model optimum the
+            plant gradient is significant only with the model's help.
         max_ipopt_iter: IPOPT iteration limit per solve, ``>= 1``.
         ipopt_options: extra IPOPT options (without the ``ipopt.`` prefix), e.g. ``{"tol": 1e-9}``.
     """
@@ -266,6 +276,8 @@ class GMASettings:
     safe_both_ends: bool = False
     noise_ratio: float = 0.5
     max_repeats_noise: int = 0
+    bound_sigma: float | None = None
+    bound_sigma_after: int = 2
     max_ipopt_iter: int = 1000
     ipopt_options: dict = field(default_factory=dict)
 
@@ -336,6 +348,9 @@ class GMASettings:
         _check_bool("safe_shrink", self.safe_shrink)
         _check("noise_ratio", self.noise_ratio, 0.0, None, low_open=True)
         _check_int("max_repeats_noise", self.max_repeats_noise, 0, " (0 = off)")
+        if self.bound_sigma is not None:
+            _check("bound_sigma", self.bound_sigma, 0.0, None)
+        _check_int("bound_sigma_after", self.bound_sigma_after, 0)
         _check_int("max_ipopt_iter", self.max_ipopt_iter, 1)
         _check_int("cost_sigma_after", self.cost_sigma_after, 0)
         if self.cost_sigma_until is not None:
