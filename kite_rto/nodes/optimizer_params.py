@@ -77,6 +77,10 @@ PARAMS = (
               "after which the measured cost rose by more than this many standard errors: back to the previous "
               "point, the trust radius halved where the step moved (negative = never)", -1.0, 100.0,
               unit="standard errors"),
+    ParamSpec("bound_sigma", -1.0 if _S.gma.bound_sigma is None else _S.gma.bound_sigma, "GMA holds a setpoint "
+              "at a bound of the shape box from the third iteration on unless the held problem's multiplier of it "
+              "exceeds this many standard deviations of the cost modifier (negative = never)", -1.0, 100.0,
+              unit="standard deviations"),
     ParamSpec("safe_both_ends", _S.gma.safe_both_ends, "GMA's safe step learns the altitude constraint's curvature "
               "from both ends of each past step: the gradient at its end predicting its start too (false: from its "
               "start only)"),
@@ -143,6 +147,7 @@ def settings_from_params(v: dict) -> KiteRTOSettings:
                                   model_secant_cost=v["model_secant_cost"], trust_radius=v["trust_radius"],
                                   averaging_schedule=(1.0, v["n_laps_factor"]),
                                   reject_sigma=None if v["reject_sigma"] < 0 else v["reject_sigma"],
+                                  bound_sigma=None if v["bound_sigma"] < 0 else v["bound_sigma"],
                                   safe_both_ends=v["safe_both_ends"],
                                   # the altitude's own noise filter is part of the noise-matched one
                                   constraint_drift=None if drift is None else _S.gma.constraint_drift)
