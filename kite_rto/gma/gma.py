@@ -27,7 +27,7 @@ from .records import ExperimentRequest, ExperimentResult, History, IterationReco
 from .settings import GMASettings, per_setpoint
 from .safety import observed_curvature, safe_fraction, truncation_bound
 from .kkt import kkt_test
-from .structure import excluded_directions, structure_plan, structure_test
+from .structure import _side, excluded_directions, structure_plan, structure_test
 
 __all__ = ["GMA"]
 
@@ -714,10 +714,11 @@ class GMA:
                                                                   or self._k < s.cost_sigma_until):
             pessimism = s.cost_sigma * np.nan_to_num(spread, nan=0.0, posinf=0.0)
             notes.append(f"pessimistic cost: {s.cost_sigma:g} x sigma {np.round(spread, 4).tolist()}")
-        res = self.modified_nlp.solve(mods, radius=radius_abs, convexification=self._q,
-                                      penalty=s.constraint_penalty, x0=model.u, spread=pessimism)
-        if self._bound_hold_due(res):
-            res = self._hold_bounds(c_k, mods, spread, radius_abs, model, pessimism, res, notes)
+
+        def solve(radius):
+            return self.modified_nlp.solve(mods, radius=radius, convexification=self._q,
+                                           penalty=s.constraint_penalty, x0=model.u, spread=pessimism)
+        res = self._hold_bounds(c_k, spread, radius_abs, solve, solve(radius_abs), notes)
         if not res.success:
             self._shrink_radius()
             return replace(hold, decision=Decision.HOLD_SOLVE_FAILED, modifiers=mods, cost=res.f, status=res.status)
@@ -732,29 +733,24 @@ class GMA:
         return _Proposal(Decision.STEP, detail, mods, u_star, res.f, res.status, c_star,
                          np.maximum(res.lam_g[: pr.n_g], 0.0))
 
-    def _bound_hold_due(self, res) -> bool:
-        """Whether the bound test (``GMASettings.bound_sigma``) runs in this iteration (after a solved problem)."""
-        s = self.settings
-        return s.bound_sigma is not None and self._k >= s.bound_sigma_after and res.success
-
-    def _hold_bounds(self, c_k, mods: Modifiers, spread, radius_abs, model: ModelRealization, pessimism, res,
-                     notes: list[str]):
+    def _hold_bounds(self, c_k, spread, radius_abs, solve, res, notes: list[str]):
         """The modified problem with the setpoints at a bound of the box held there (zero trust radius) where
         holding is not measurably wrong (``GMASettings.bound_sigma``), else ``res``, the problem solved without
-        holding. Holding is wrong where the held problem's multiplier of that setpoint (the modified Lagrangian's
-        descent into the box at the held solution: the measured-KKT test at the box's bounds) exceeds
-        ``bound_sigma`` standard deviations of the filtered cost modifier (``spread``); such setpoints are
-        released and the rest solved again, once."""
+        holding (``solve(radius)`` solves it with other trust radii). Holding is wrong where the held problem's
+        multiplier of that setpoint (the modified Lagrangian's descent into the box at the held solution: the
+        measured-KKT test at the box's bounds) exceeds ``bound_sigma`` standard deviations of the filtered cost
+        modifier (``spread``); such setpoints are released and the rest solved again, once. Nothing is held before
+        ``bound_sigma_after`` or after a failed ``res``."""
         pr, s = self.problem, self.settings
-        tol = 1e-9 * self._width
-        side = np.where(c_k >= pr.c_ub - tol, 1.0, np.where(c_k <= pr.c_lb + tol, -1.0, 0.0))
+        if s.bound_sigma is None or self._k < s.bound_sigma_after or not res.success:
+            return res
+        side = _side(c_k, pr.c_lb, pr.c_ub, 1e-9)
         held = side != 0
         limit = s.bound_sigma * np.nan_to_num(np.asarray(spread, float), nan=np.inf)
         for _ in range(2):
             if not held.any():
                 break
-            kept = self.modified_nlp.solve(mods, radius=np.where(held, 0.0, radius_abs), convexification=self._q,
-                                           penalty=s.constraint_penalty, x0=model.u, spread=pessimism)
+            kept = solve(np.where(held, 0.0, radius_abs))
             if not kept.success:
                 break
             inward = -side * np.asarray(kept.lam_g[pr.n_g: pr.n_g + pr.n_c], float)   # > 0: wants into the box

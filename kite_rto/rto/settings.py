@@ -29,7 +29,8 @@ runs that then lose 99 % again leave the aspect's upper bound, where the plant o
 measured slope is noise, for the trust region's edge: from iteration 2 on a setpoint at a bound stays there unless the
 held modified problem's multiplier of it (constraints included) exceeds 2 standard deviations of the cost modifier
 (``bound_sigma`` 2; tuning seeds 0-5: 20 runs of 24 held, 7 late dips; seeds 6-8 of all twelve, never run
-before: 33 of 36 held against 31, every run ending at >= 99 % against 35). Full steps (filter gain 1) inside a trust region of 0.7 box widths keep the first iteration's large correction.
+before: 33 of 36 held against 31, every run ending at >= 99 % against 35). Full steps (filter gain 1) inside a
+trust region of 0.7 box widths keep the first iteration's large correction.
 The altitude back-off is 3 m: 6 m cost about 1 % where the constraint binds hard (h_min 115 m). The model's
 altitude constraint bounds the reference figure-eight of the lap's setpoints (``altitude = "reference"``), and in
 the 3-D field the experiment normalizes the tension by the profile observer (``wind_source =
