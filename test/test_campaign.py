@@ -123,6 +123,17 @@ def test_the_summary_evaluates_the_done_when_criteria_per_subset():
         "| nelder-mead >4 (met) | nelder-mead >4 (met) | nelder-mead 2.0 (NOT met) |")
 
 
+def test_the_summary_counts_per_seed_over_the_scenarios():
+    rows = [_row("a", 0, "gma", 99.5, 300.0), _row("b", 0, "gma", 98.0, 700.0, held=None),
+            replace(_row("a", 1, "gma", 99.2, 1500.0, held=3), reach_index=3), _row("b", 1, "gma", 97.0, None,
+                                                                                   held=None),
+            _row("a", 1, "nelder-mead", 99.1, 900.0, budget=1200.0)]
+    text = summarize(rows, budget=4.0)
+    assert "## gma: per seed" in text
+    assert "| 0 | 2 | 2/2 | 1/2 | 1 | 500 |" in text
+    assert "| 1 | 2 | 0/2 | 1/2 | 1 | never |" in text
+
+
 def test_the_table_holds_every_field_but_wall_time_in_campaign_order(tmp_path):
     rows = [_row("a", 0, "gma", 99.5, 300.0), _row("a", 0, "model-only", 90.0, None, held=None, budget=1200.0)]
     rows[1] = replace(rows[1], altitude=(None,), lowest_altitude=None, percent=(0.0,), times_s=(0.0,))

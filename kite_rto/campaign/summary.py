@@ -1,5 +1,7 @@
-"""The campaign's summary in markdown (:func:`summarize`): per scenario and GMA variant, then issue 14's done-when
-criteria over all runs and over the tuning and report subsets, then the baselines' time to 99 % over GMA's.
+"""The campaign's summary in markdown (:func:`summarize`): per scenario and GMA variant, per seed (a seed is the same
+turbulence box in every scenario with the same Mann length scale and anisotropy, so outcomes correlate by seed),
+then issue 14's done-when criteria over all runs and over the tuning and report subsets, then the baselines' time to
+99 % over GMA's.
 
 Times to 99 % of runs that never reach it count as infinite in medians ("never" when the median is). A baseline's
 per-seed ratio is its time to 99 % over the reference GMA run's on the same seed (seeds where GMA did not reach
@@ -106,6 +108,17 @@ def _scenario_table(rows, variant: str) -> list:
     return lines
 
 
+def _seed_table(rows, variant: str) -> list:
+    lines = ["| seed | runs | at 99 % by iterate 1 | held from <= 3 | runs < 99 % | median t99 s |",
+             "|---|---|---|---|---|---|"]
+    for seed in sorted({r.seed for r in rows if r.method == variant}):
+        rs = [r for r in rows if r.seed == seed and r.method == variant]
+        early = sum(r.reach_index is not None and r.reach_index <= 1 for r in rs)
+        lines.append(f"| {seed} | {len(rs)} | {early}/{len(rs)} | {sum(_held3(r) for r in rs)}/{len(rs)} | "
+                     f"{sum(r.final_percent < 99.0 for r in rs)} | {_fmt_t(_median([_t(r) for r in rs]))} |")
+    return lines
+
+
 def _baseline_table(rows, budget: float) -> list:
     methods = [m for m in BASELINES if any(r.method == m for r in rows)]
     if not methods:
@@ -134,6 +147,7 @@ def summarize(rows, budget: float) -> str:
            f"methods {', '.join(dict.fromkeys(r.method for r in rows))}", ""]
     for v in variants:
         out += [f"## {v}: per scenario", ""] + _scenario_table(rows, v) + [""]
+        out += [f"## {v}: per seed (the same turbulence in most scenarios)", ""] + _seed_table(rows, v) + [""]
         subsets = {"all": lambda r: True, "tuning": lambda r: r.tuning, "report": lambda r: not r.tuning}
         cols = {k: _criteria([r for r in rows if r.method == v and f(r)], [r for r in rows if f(r)], budget)
                 for k, f in subsets.items()}
