@@ -124,10 +124,9 @@ def test_the_summary_evaluates_the_done_when_criteria_per_subset():
 
 
 def test_the_summary_counts_per_seed_over_the_scenarios():
-    rows = [_row("a", 0, "gma", 99.5, 300.0), _row("b", 0, "gma", 98.0, 700.0, held=None),
-            replace(_row("a", 1, "gma", 99.2, 1500.0, held=3), reach_index=3), _row("b", 1, "gma", 97.0, None,
-                                                                                   held=None),
-            _row("a", 1, "nelder-mead", 99.1, 900.0, budget=1200.0)]
+    late = replace(_row("a", 1, "gma", 99.2, 1500.0, held=3), reach_index=3)     # at 99 % from iterate 3 on
+    rows = [_row("a", 0, "gma", 99.5, 300.0), _row("b", 0, "gma", 98.0, 700.0, held=None), late,
+            _row("b", 1, "gma", 97.0, None, held=None), _row("a", 1, "nelder-mead", 99.1, 900.0, budget=1200.0)]
     text = summarize(rows, budget=4.0)
     assert "## gma: per seed" in text
     assert "| 0 | 2 | 2/2 | 1/2 | 1 | 500 |" in text
