@@ -16,13 +16,13 @@ from .problem import ModelProblem
 from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
 from .settings import GMASettings
 from .store import HistoryStore, StoreError
-from .structure import (BoundActivity, StructureTest, excluded_directions, model_optimum, robust_bounds,
-                        structure_plan, structure_test)
+from .structure import (BoundActivity, StructureTest, bound_side, excluded_directions, model_optimum,
+                        robust_bounds, structure_plan, structure_test)
 
 __all__ = ["HistoryStore", "StoreError",
            "ModelProblem", "GMASettings", "GMA", "ModelRealization", "Modifiers", "Decision",
            "GradientEstimator", "GradientEstimate", "PlantPoint", "FiniteDifferenceGradient", "LeastSquaresGradient",
            "DirectionalGradient", "PrivilegedDirections", "privileged_directions", "lagrangian_gradient",
            "ExperimentRequest", "ExperimentResult", "IterationRecord", "History", "run_offline",
-           "BoundActivity", "robust_bounds", "model_optimum", "excluded_directions", "structure_plan",
+           "BoundActivity", "robust_bounds", "bound_side", "model_optimum", "excluded_directions", "structure_plan",
            "StructureTest", "structure_test", "KKTTest", "kkt_test", "NoiseTest", "noise_test"]

@@ -27,7 +27,7 @@ from .records import ExperimentRequest, ExperimentResult, History, IterationReco
 from .settings import GMASettings, per_setpoint
 from .safety import observed_curvature, safe_fraction, truncation_bound
 from .kkt import kkt_test
-from .structure import _side, excluded_directions, structure_plan, structure_test
+from .structure import bound_side, excluded_directions, structure_plan, structure_test
 
 __all__ = ["GMA"]
 
@@ -744,7 +744,7 @@ class GMA:
         pr, s = self.problem, self.settings
         if s.bound_sigma is None or self._k < s.bound_sigma_after or not res.success:
             return res
-        side = _side(c_k, pr.c_lb, pr.c_ub, 1e-9)
+        side = bound_side(c_k, pr.c_lb, pr.c_ub, 1e-9)
         held = side != 0
         limit = s.bound_sigma * np.nan_to_num(np.asarray(spread, float), nan=np.inf)
         for _ in range(2):

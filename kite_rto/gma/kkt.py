@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .gradients import PlantPoint
-from .structure import _side
+from .structure import bound_side
 
 __all__ = ["KKTTest", "kkt_test"]
 
@@ -74,7 +74,7 @@ def kkt_test(c_k, nominal: PlantPoint, point: PlantPoint, nu, c_lb, c_ub, sigma:
     c_k = np.asarray(c_k, float)
     lb, ub = np.asarray(c_lb, float), np.asarray(c_ub, float)
     dc = np.asarray(point.c, float) - c_k
-    side = _side(c_k, lb, ub, tol)
+    side = bound_side(c_k, lb, ub, tol)
     held = np.flatnonzero((side != 0) & (side * dc < 0))
     if held.size == 0:
         return None

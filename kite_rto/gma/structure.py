@@ -30,8 +30,8 @@ from .modifiers import Modifiers
 from .problem import ModelProblem
 from .settings import GMASettings
 
-__all__ = ["BoundActivity", "robust_bounds", "model_optimum", "excluded_directions", "structure_plan",
-           "StructureTest", "structure_test"]
+__all__ = ["BoundActivity", "robust_bounds", "bound_side", "model_optimum", "excluded_directions",
+           "structure_plan", "StructureTest", "structure_test"]
 
 
 @dataclass
@@ -57,7 +57,9 @@ class BoundActivity:
         return (self.nominal != 0) & (self.at_bound == 0)
 
 
-def _side(c, lb, ub, tol):
+def bound_side(c, lb, ub, tol):
+    """Per setpoint -1 / 0 / +1: ``c`` within ``tol`` box widths of its lower bound / inside / within ``tol`` of
+    its upper bound."""
     w = ub - lb
     return np.where(c <= lb + tol * w, -1, np.where(c >= ub - tol * w, 1, 0))
 
@@ -99,7 +101,7 @@ def robust_bounds(optimum: Callable[[np.ndarray, np.ndarray], np.ndarray], theta
     if optima.shape[1] != lb.size or not np.all(np.isfinite(optima)):
         raise ValueError(f"robust_bounds: optimum returned {optima.tolist()}: expected finite (n_c={lb.size},) "
                          f"setpoints")
-    sides = np.array([_side(c, lb, ub, tol) for c in optima])
+    sides = np.array([bound_side(c, lb, ub, tol) for c in optima])
     robust = np.where(np.all(sides == sides[0], axis=0), sides[0], 0)
     return BoundActivity(robust, sides[0], optima, [name for name, _, _ in cases])
 

@@ -19,7 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..gma import (BoundActivity, GMASettings, PrivilegedDirections, lagrangian_gradient, model_optimum,
+from ..gma import (BoundActivity, GMASettings, PrivilegedDirections, bound_side, lagrangian_gradient, model_optimum,
                    privileged_directions, robust_bounds)
 from .ocp import KiteOCPSettings, model_problem
 from ..kite.params import KiteParams, ParameterError
@@ -74,11 +74,6 @@ class ModelUncertainty:
         return [float(getattr(self, n)) for n in self.names()]
 
 
-def _at_bound(x, lb, ub, tol: float = 1e-6) -> np.ndarray:
-    w = ub - lb
-    return np.where(x <= lb + tol * w, -1, np.where(x >= ub - tol * w, 1, 0))
-
-
 @lru_cache(maxsize=8)
 def bound_activity_for(box: ShapeBox, x0: tuple, model_params: KiteParams = KiteParams(),
                        ocp: KiteOCPSettings = KiteOCPSettings(),
@@ -124,5 +119,5 @@ def privileged_directions_for(box: ShapeBox, x0: tuple, nu: tuple, model_params:
     theta0 = [float(getattr(model_params, n)) for n in names]
     return privileged_directions(gradient, theta0, uncertainty.values(), n_directions,
                                  scale=box.upper() - box.lower(),
-                                 at_bound=_at_bound(x0, box.lower(), box.upper()) if at_bound is None
+                                 at_bound=bound_side(x0, box.lower(), box.upper(), 1e-6) if at_bound is None
                                  else np.asarray(at_bound))
