@@ -94,3 +94,37 @@ def test_a_constraint_that_needs_the_setpoint_releases_it():
     rec = run_offline(gma, plant, 1).iterations[0]
     assert rec.c_next[0] < 2.0 - 0.1
     assert not any(n.startswith("bound held") for n in rec.notes)
+
+
+def run_from(seed, a, c0, **changes):
+    s = GMASettings(filter_gain=1.0, trust_radius=0.25, trust_adapt=False, bound_sigma=2.0, bound_sigma_after=0,
+                    **changes)
+    gma = GMA(model(), s, FiniteDifferenceGradient(0.2), c0=c0)
+    run_offline(gma, noisy_plant(seed, a), 10)
+    return gma.records
+
+
+def test_the_start_bound_is_tested_by_the_measurements_without_bound_sigma_start():
+    """a = 1.6: the plant pulls into the box with slope 0.4 at the bound c1 = 2 the run starts on (the model
+    optimum), about one standard deviation of the measured slope. Held there (the default) the iterate stays on the
+    bound the model chose; with ``bound_sigma_start`` False the start bound is not held and the measurements move
+    the iterate off it in most iterations."""
+    held = sum(off_bound(run_from(seed, 1.6, [2.0, 1.0])) for seed in range(6))
+    tested = sum(off_bound(run_from(seed, 1.6, [2.0, 1.0], bound_sigma_start=False)) for seed in range(6))
+    assert held <= 12
+    assert tested >= 30
+    assert tested >= held + 20
+
+
+def test_a_bound_reached_by_a_step_is_held_either_way():
+    """Started inside the box at c1 = 1 with the plant optimum on the bound (a = 2): the steps reach the bound and,
+    from there, the hold keeps it against noise whether or not the start's bounds are held (the start is on none)."""
+    for seed in range(3):
+        default = [r.c_next.tolist() for r in run_from(seed, 2.0, [1.0, 1.0])]
+        assert default == [r.c_next.tolist() for r in run_from(seed, 2.0, [1.0, 1.0], bound_sigma_start=False)]
+    assert sum(off_bound(run_from(seed, 2.0, [1.0, 1.0])[2:]) for seed in range(6)) <= 6
+
+
+def test_bad_bound_sigma_start_is_named():
+    with pytest.raises(ValueError, match="bound_sigma_start"):
+        GMASettings(bound_sigma_start="no")

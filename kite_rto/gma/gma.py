@@ -745,6 +745,8 @@ class GMA:
         if s.bound_sigma is None or self._k < s.bound_sigma_after or not res.success:
             return res
         side = bound_side(c_k, pr.c_lb, pr.c_ub, 1e-9)
+        if not s.bound_sigma_start:
+            side = np.where(side == bound_side(self.history.c0, pr.c_lb, pr.c_ub, 1e-9), 0, side)
         held = side != 0
         limit = s.bound_sigma * np.nan_to_num(np.asarray(spread, float), nan=np.inf)
         for _ in range(2):

@@ -81,6 +81,9 @@ PARAMS = (
               "at a bound of the shape box from the third iteration on unless the held problem's multiplier of it "
               "exceeds this many standard deviations of the cost modifier (negative = never)", -1.0, 100.0,
               unit="standard deviations"),
+    ParamSpec("bound_sigma_start", _S.gma.bound_sigma_start, "bound_sigma also holds a setpoint at the bound the run "
+              "started on (the model optimum's); false holds only bounds the iterates reached by a step, so the "
+              "measurements can move the iterate off a bound the model chose"),
     ParamSpec("safe_both_ends", _S.gma.safe_both_ends, "GMA's safe step learns the altitude constraint's curvature "
               "from both ends of each past step: the gradient at its end predicting its start too (false: from its "
               "start only)"),
@@ -148,6 +151,7 @@ def settings_from_params(v: dict) -> KiteRTOSettings:
                                   averaging_schedule=(1.0, v["n_laps_factor"]),
                                   reject_sigma=None if v["reject_sigma"] < 0 else v["reject_sigma"],
                                   bound_sigma=None if v["bound_sigma"] < 0 else v["bound_sigma"],
+                                  bound_sigma_start=v["bound_sigma_start"],
                                   safe_both_ends=v["safe_both_ends"],
                                   # the altitude's own noise filter is part of the noise-matched one
                                   constraint_drift=None if drift is None else _S.gma.constraint_drift)
