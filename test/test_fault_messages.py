@@ -68,6 +68,9 @@ def test_bad_steering_never_unblocks_lockstep(probe, ros_env, request, tmp_path)
         plant = node("plant", "plant", ros_env, tmp_path, {"command_timeout": 30.0, "resend_period": 0.05})
         try:
             assert probe.spin_until(lambda: states, 30.0), plant.text()
+            # an answer sent before the plant's steering subscription has matched is lost (volatile) and the plant
+            # would wait for it for ever: on a busy machine discovery can take longer than the first state
+            assert probe.spin_until(lambda: steer.get_subscription_count() >= 1, 60.0), "plant not subscribed"
 
             def answer_good():
                 now = stamp_to_ns(states[-1].header.stamp)
