@@ -740,7 +740,8 @@ class GMA:
         multiplier of that setpoint (the modified Lagrangian's descent into the box at the held solution: the
         measured-KKT test at the box's bounds) exceeds ``bound_sigma`` standard deviations of the filtered cost
         modifier (``spread``); such setpoints are released and the rest solved again, once. Nothing is held before
-        ``bound_sigma_after`` or after a failed ``res``."""
+        ``bound_sigma_after`` or after a failed ``res``, nor, with ``bound_sigma_start`` False, at the bound the
+        run started on (``history.c0``)."""
         pr, s = self.problem, self.settings
         if s.bound_sigma is None or self._k < s.bound_sigma_after or not res.success:
             return res
