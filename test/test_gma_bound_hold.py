@@ -31,9 +31,9 @@ def noisy_plant(seed, a):
     return plant
 
 
-def run(seed, a, n_iter=10, **changes):
+def run(seed, a, n_iter=10, c0=(2.0, 1.0), **changes):
     s = GMASettings(filter_gain=1.0, trust_radius=0.25, trust_adapt=False, **changes)
-    gma = GMA(model(), s, FiniteDifferenceGradient(0.2), c0=[2.0, 1.0])
+    gma = GMA(model(), s, FiniteDifferenceGradient(0.2), c0=list(c0))
     run_offline(gma, noisy_plant(seed, a), n_iter)
     return gma.records
 
@@ -97,11 +97,8 @@ def test_a_constraint_that_needs_the_setpoint_releases_it():
 
 
 def run_from(seed, a, c0, **changes):
-    s = GMASettings(filter_gain=1.0, trust_radius=0.25, trust_adapt=False, bound_sigma=2.0, bound_sigma_after=0,
-                    **changes)
-    gma = GMA(model(), s, FiniteDifferenceGradient(0.2), c0=c0)
-    run_offline(gma, noisy_plant(seed, a), 10)
-    return gma.records
+    """:func:`run` from ``c0`` with ``bound_sigma`` 2 from iteration 0."""
+    return run(seed, a, c0=c0, bound_sigma=2.0, bound_sigma_after=0, **changes)
 
 
 def test_the_start_bound_is_tested_by_the_measurements_without_bound_sigma_start():
