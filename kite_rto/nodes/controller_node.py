@@ -28,7 +28,7 @@ from ..flight.sources import parse_source
 from ..flight.steering_loop import SteeringLoop, fmt_setpoints
 from ..kite.params import KiteParams, ParameterError
 from .graph_watch import InputWatch, publishers_of
-from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
+from .interface import LAP_HISTORY, LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
 from .peer_check import PlantAgreement
 from .parameters import ParamSpec, declare_params
 from .spin import run_node
@@ -113,7 +113,7 @@ class ControllerNode(Node):
         c0 = Setpoints.from_degrees(v["theta_0_deg"], v["A_phi_deg"], v["A_theta_deg"])
         self.pub_steering = self.create_publisher(JointState, STEERING, MEASUREMENTS)
         self.pub_path = self.create_publisher(Path, REFERENCE_PATH, LATCHED)
-        self.pub_laps = self.create_publisher(JointState, LAPS, RELIABLE_10)
+        self.pub_laps = self.create_publisher(JointState, LAPS, LAP_HISTORY)
         source = parse_source(v["setpoint_source"], self.get_namespace())
         try:
             self.loop = SteeringLoop(params, settings, c0, answer=self.answer, lap=self.publish_lap,

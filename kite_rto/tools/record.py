@@ -45,7 +45,7 @@ from visualization_msgs.msg import MarkerArray
 
 from ..nodes import topics as T
 from ..nodes.namespace import add_namespace_option, namespace_args
-from ..nodes.interface import LATCHED, MEASUREMENTS, RELIABLE_10
+from ..nodes.interface import LAP_HISTORY, LATCHED, MEASUREMENTS, RELIABLE_10
 from ..nodes.spin import request_exit, run_node
 from .graph_params import GraphParameters
 from .record_time import LOG_TIME_MODES, PER_SAMPLE, SimLogTime
@@ -62,7 +62,7 @@ TOPICS: dict = {
     T.WIND_ESTIMATE: (Vector3Stamped, MEASUREMENTS),
     T.STEERING: (JointState, MEASUREMENTS),
     T.REFERENCE_PATH: (Path, LATCHED),
-    T.LAPS: (JointState, RELIABLE_10),
+    T.LAPS: (JointState, LAP_HISTORY),
     T.CRASHES: (UInt32, LATCHED),
     T.SETPOINTS: (JointState, LATCHED),
     T.STATUS: (DiagnosticArray, RELIABLE_10),
