@@ -61,6 +61,13 @@ class DirectionalGradient(GradientEstimator):
             direction whose backward step leaves the box is flown forward whole, so a direction that mixes a
             setpoint at its bound with free ones never changes side in the free ones either. Falls back to that
             rule when the reflected points are worse conditioned than ``rcond_min``.
+        lead: perturb each direction on the side the last step went (``toward`` of :meth:`plan_iteration`,
+            which :class:`~kite_rto.gma.GMA` passes as ``c_k - c_(k-1)``): the sign of the direction's component
+            along that step in box-width-scaled setpoints, clipped to the box, as long as the clipped point keeps
+            at least half of the direction's step; otherwise the rule below. The next step mostly goes on the
+            same way, and a one-sided quotient is a secant: taken on that side it spans the region the step
+            enters, taken on the other side it is extrapolated across ``c_k`` with the plant's curvature
+            (issue #14 item 3). Not with ``alternate``.
 
     A perturbation that would leave the setpoint box is taken backwards, and clipped to the box when that
     leaves it too (whichever keeps more of the direction). The fit always uses the setpoints actually flown.
@@ -70,7 +77,7 @@ class DirectionalGradient(GradientEstimator):
 
     def __init__(self, directions, step: float = 0.5, reuse: bool = True, radius=None,
                  window: int | None = None, rcond_min: float = 0.2, alternate: bool = False,
-                 reflect: bool = False):
+                 reflect: bool = False, lead: bool = False):
         U = np.asarray(directions, dtype=float)
         if U.ndim == 1:
             U = U[:, None]
@@ -105,6 +112,12 @@ class DirectionalGradient(GradientEstimator):
         if not isinstance(reflect, bool):
             raise ValueError(f"DirectionalGradient.reflect={reflect!r}: expected True or False")
         self.reflect = reflect
+        if not isinstance(lead, bool):
+            raise ValueError(f"DirectionalGradient.lead={lead!r}: expected True or False")
+        if lead and self.alternate:
+            raise ValueError("DirectionalGradient.lead=True with alternate=True: expected at most one rule for the "
+                             "perturbations' side")
+        self.lead = lead
 
     @property
     def n_directions(self) -> int:
@@ -117,7 +130,7 @@ class DirectionalGradient(GradientEstimator):
         extra = np.asarray(extra, dtype=float).reshape(self.U.shape[0], -1)
         window = None if self.window == 2 * self.n_directions else self.window
         return DirectionalGradient(np.column_stack([self.U, extra]), self.step, self.reuse, self._radius_arg,
-                                   window, self.rcond_min, self.alternate, self.reflect)
+                                   window, self.rcond_min, self.alternate, self.reflect, self.lead)
 
     def coordinates(self, dc) -> np.ndarray:
         """Direction-basis coordinates ``z = U^+ dc`` of setpoint displacements ``dc`` (n_c,) or (m, n_c)."""
@@ -144,10 +157,14 @@ class DirectionalGradient(GradientEstimator):
     def plan(self, c_k, lb, ub, past=()):
         return self.plan_iteration(c_k, lb, ub, past, 0)
 
-    def plan_iteration(self, c_k, lb, ub, past, iteration):
+    def plan_iteration(self, c_k, lb, ub, past, iteration, toward=None):
+        """:meth:`plan` for GMA's iteration ``iteration``; ``toward`` (n_c,), setpoint units: the last step
+        ``c_k - c_(k-1)``, used with ``lead`` (None or zero: no last step, the rule without ``lead``)."""
         c_k, prefer = np.asarray(c_k, float), _preferred_sign(self.alternate, iteration)
         if self.reuse and self._select(c_k, past)[1] >= self.rcond_min:
             return []
+        if self.lead and toward is not None and np.any(np.asarray(toward, float) != 0.0):
+            return self._leading(c_k, np.asarray(lb, float), np.asarray(ub, float), np.asarray(toward, float))
         if self.reflect and prefer < 0:
             lb, ub = np.asarray(lb, float), np.asarray(ub, float)
             back = [_reflected(c_k, x, lb, ub) for x in self._sided(c_k, lb, ub, 1.0)]
@@ -165,6 +182,20 @@ class DirectionalGradient(GradientEstimator):
             # the other sign only when it keeps more than rounding does (both full steps inside the box differ
             # by ~1e-16, and argmax would pick a side at random)
             points.append(cands[1] if kept[1] > kept[0] * (1.0 + 1e-9) else cands[0])
+        return points
+
+    def _leading(self, c_k, lb, ub, toward) -> list:
+        """``lead``'s points: per direction the side of ``toward`` (scaled by the box width) when its clipped
+        step keeps at least half of the direction's step, else :meth:`_sided`'s choice for that direction."""
+        w = ub - lb
+        fallback = self._sided(c_k, lb, ub, 1.0)
+        points = []
+        for j, d in enumerate(self.U.T):
+            sign = float(np.sign((d / w) @ (toward / w)))
+            full = self.coordinates(self.step * d)
+            x = np.clip(c_k + sign * self.step * d, lb, ub)
+            kept = abs(float(self.coordinates(x - c_k) @ full)) / float(full @ full)
+            points.append(x if sign != 0.0 and kept >= 0.5 else fallback[j])
         return points
 
     def estimate(self, c_k, nominal: PlantPoint, new: Sequence[PlantPoint], past=(), model=None):

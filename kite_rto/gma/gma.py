@@ -249,8 +249,11 @@ class GMA:
         """The requests of the open iteration at operating point ``c`` (nominal first), ids ``<tag>-<j>-...``."""
         pr, s, k = self.problem, self.settings, self._k
         past = self._points(exclude_iteration=k)
+        lead = {}
+        if getattr(self.gradient, "lead", False) and self.history.iterations:   # the last step: c - c_(k-1)
+            lead = {"toward": c - np.asarray(self.history.iterations[-1].c_k, float)}
         pert = [np.asarray(x, float)
-                for x in self.gradient.plan_iteration(c, pr.c_lb, pr.c_ub, past, self._alternation_index())]
+                for x in self.gradient.plan_iteration(c, pr.c_lb, pr.c_ub, past, self._alternation_index(), **lead)]
         struct = (structure_plan(c, self._excluded(), s.structure_step, pr.c_lb, pr.c_ub)
                   if self._structure_due() else [])
         plan = [(c.copy(), "nominal")] + [(x, "perturbation") for x in pert] + [(x, "structure") for x in struct]

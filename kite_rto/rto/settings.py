@@ -97,6 +97,8 @@ class KiteRTOSettings:
             perturbations through ``c_k`` in the setpoints where that stays in the box (``reflect`` of
             :class:`~kite_rto.gma.DirectionalGradient`), so that a direction mixing theta_0 held at its bound with
             free setpoints still changes side in the free ones.
+        fd_lead: with ``"directional"``: perturb each direction on the side the last step went, where that keeps
+            at least half of the step in the box (``lead`` of :class:`~kite_rto.gma.DirectionalGradient`).
         n_directions: privileged directions of ``"directional"`` (1 to 3; at most the coordinates not held at a
             robustly active bound, none under the default prior).
         uncertainty: the model-parameter deviations that define the privileged directions.
@@ -117,6 +119,7 @@ class KiteRTOSettings:
     fd_step: tuple = (0.5, 0.5, 0.5)
     fd_alternate: bool = False
     fd_reflect: bool = False
+    fd_lead: bool = False
     n_directions: int = 3
     uncertainty: ModelUncertainty = field(default_factory=ModelUncertainty)
     gma: GMASettings = field(default_factory=default_gma_settings)
@@ -135,6 +138,9 @@ class KiteRTOSettings:
             raise ValueError(f"{n}.fd_alternate = {self.fd_alternate!r}: expected True or False")
         if not isinstance(self.fd_reflect, bool):
             raise ValueError(f"{n}.fd_reflect = {self.fd_reflect!r}: expected True or False")
+        if not isinstance(self.fd_lead, bool) or (self.fd_lead and self.fd_alternate):
+            raise ValueError(f"{n}.fd_lead = {self.fd_lead!r}: expected True or False, and not True with "
+                             f"fd_alternate")
         if not isinstance(self.gma, GMASettings):
             raise ValueError(f"{n}.gma = {self.gma!r}: expected a GMASettings")
         if isinstance(self.n_directions, bool) or self.n_directions not in (1, 2, 3):
@@ -173,7 +179,7 @@ class KiteRTOSettings:
             if directions is None:
                 raise ValueError("KiteRTOSettings.gradient_estimator: 'directional' needs the privileged directions")
             return DirectionalGradient(directions, step=float(np.ravel(self.fd_step)[0]), reuse=False,
-                                       alternate=self.fd_alternate, reflect=self.fd_reflect)
+                                       alternate=self.fd_alternate, reflect=self.fd_reflect, lead=self.fd_lead)
         alternate = self.fd_alternate and self.gradient != "central"
         if self.gradient == "least_squares":
             return LeastSquaresGradient(FiniteDifferenceGradient(steps, alternate=alternate), radius=2.0 * steps,
