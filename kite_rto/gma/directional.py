@@ -68,16 +68,22 @@ class DirectionalGradient(GradientEstimator):
             same way, and a one-sided quotient is a secant: taken on that side it spans the region the step
             enters, taken on the other side it is extrapolated across ``c_k`` with the plant's curvature
             (issue #14 item 3). Not with ``alternate``.
+        keep_side: in (0, 1]: the preferred side (forward, or backward in an odd iteration with ``alternate``) is
+            flown, clipped to the box, as long as the clipped point keeps at least this fraction of the
+            direction's step; below it, the side that keeps more. Default 1: the preferred side only when its
+            step fits whole, so an iterate less than one step from its upper bound measures behind it; 0.5 keeps
+            a secant on the side the box leaves room for, shorter and noisier but over the region a step towards
+            that bound enters.
 
-    A perturbation that would leave the setpoint box is taken backwards, and clipped to the box when that
-    leaves it too (whichever keeps more of the direction). The fit always uses the setpoints actually flown.
+    A perturbation that would leave the setpoint box is taken backwards (``keep_side``), and clipped to the box
+    when that leaves it too (whichever keeps more of the direction). The fit always uses the setpoints actually flown.
     """
 
     uses_model = True
 
     def __init__(self, directions, step: float = 0.5, reuse: bool = True, radius=None,
                  window: int | None = None, rcond_min: float = 0.2, alternate: bool = False,
-                 reflect: bool = False, lead: bool = False):
+                 reflect: bool = False, lead: bool = False, keep_side: float = 1.0):
         U = np.asarray(directions, dtype=float)
         if U.ndim == 1:
             U = U[:, None]
@@ -118,6 +124,9 @@ class DirectionalGradient(GradientEstimator):
             raise ValueError("DirectionalGradient.lead=True with alternate=True: expected at most one rule for the "
                              "perturbations' side")
         self.lead = lead
+        if isinstance(keep_side, bool) or not isinstance(keep_side, (int, float)) or not 0.0 < keep_side <= 1.0:
+            raise ValueError(f"DirectionalGradient.keep_side={keep_side!r}: expected a number in (0, 1]")
+        self.keep_side = float(keep_side)
 
     @property
     def n_directions(self) -> int:
@@ -130,7 +139,8 @@ class DirectionalGradient(GradientEstimator):
         extra = np.asarray(extra, dtype=float).reshape(self.U.shape[0], -1)
         window = None if self.window == 2 * self.n_directions else self.window
         return DirectionalGradient(np.column_stack([self.U, extra]), self.step, self.reuse, self._radius_arg,
-                                   window, self.rcond_min, self.alternate, self.reflect, self.lead)
+                                   window, self.rcond_min, self.alternate, self.reflect, self.lead,
+                                   self.keep_side)
 
     def coordinates(self, dc) -> np.ndarray:
         """Direction-basis coordinates ``z = U^+ dc`` of setpoint displacements ``dc`` (n_c,) or (m, n_c)."""
@@ -173,12 +183,16 @@ class DirectionalGradient(GradientEstimator):
         return self._sided(c_k, lb, ub, prefer)
 
     def _sided(self, c_k, lb, ub, prefer: float) -> list:
-        """One point per direction: the sign whose step, clipped to the box, keeps most of the direction
-        (``prefer`` first)."""
+        """One point per direction: the ``prefer`` sign while its step, clipped to the box, keeps ``keep_side`` of
+        the direction; else the sign that keeps more (``prefer`` first)."""
         points = []
         for d in self.U.T:
+            full = self.coordinates(self.step * d)
             cands = [np.clip(c_k + sign * self.step * d, lb, ub) for sign in (prefer, -prefer)]
-            kept = [abs(float(self.coordinates(c - c_k) @ self.coordinates(self.step * d))) for c in cands]
+            kept = [abs(float(self.coordinates(c - c_k) @ full)) for c in cands]
+            if self.keep_side < 1.0 and kept[0] >= self.keep_side * float(full @ full):
+                points.append(cands[0])
+                continue
             # the other sign only when it keeps more than rounding does (both full steps inside the box differ
             # by ~1e-16, and argmax would pick a side at random)
             points.append(cands[1] if kept[1] > kept[0] * (1.0 + 1e-9) else cands[0])

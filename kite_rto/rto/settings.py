@@ -99,6 +99,9 @@ class KiteRTOSettings:
             free setpoints still changes side in the free ones.
         fd_lead: with ``"directional"``: perturb each direction on the side the last step went, where that keeps
             at least half of the step in the box (``lead`` of :class:`~kite_rto.gma.DirectionalGradient`).
+        fd_keep: with ``"directional"``: the forward perturbation is flown, clipped to the box, while it keeps at
+            least this fraction of the step, in (0, 1] (``keep_side`` of
+            :class:`~kite_rto.gma.DirectionalGradient`; 1: backwards whenever the forward step does not fit whole).
         n_directions: privileged directions of ``"directional"`` (1 to 3; at most the coordinates not held at a
             robustly active bound, none under the default prior).
         uncertainty: the model-parameter deviations that define the privileged directions.
@@ -120,6 +123,7 @@ class KiteRTOSettings:
     fd_alternate: bool = False
     fd_reflect: bool = False
     fd_lead: bool = False
+    fd_keep: float = 1.0
     n_directions: int = 3
     uncertainty: ModelUncertainty = field(default_factory=ModelUncertainty)
     gma: GMASettings = field(default_factory=default_gma_settings)
@@ -141,6 +145,9 @@ class KiteRTOSettings:
         if not isinstance(self.fd_lead, bool) or (self.fd_lead and self.fd_alternate):
             raise ValueError(f"{n}.fd_lead = {self.fd_lead!r}: expected True or False, and not True with "
                              f"fd_alternate")
+        if isinstance(self.fd_keep, bool) or not isinstance(self.fd_keep, (int, float)) or \
+                not 0.0 < self.fd_keep <= 1.0:
+            raise ValueError(f"{n}.fd_keep = {self.fd_keep!r}: expected a number in (0, 1]")
         if not isinstance(self.gma, GMASettings):
             raise ValueError(f"{n}.gma = {self.gma!r}: expected a GMASettings")
         if isinstance(self.n_directions, bool) or self.n_directions not in (1, 2, 3):
@@ -179,7 +186,8 @@ class KiteRTOSettings:
             if directions is None:
                 raise ValueError("KiteRTOSettings.gradient_estimator: 'directional' needs the privileged directions")
             return DirectionalGradient(directions, step=float(np.ravel(self.fd_step)[0]), reuse=False,
-                                       alternate=self.fd_alternate, reflect=self.fd_reflect, lead=self.fd_lead)
+                                       alternate=self.fd_alternate, reflect=self.fd_reflect, lead=self.fd_lead,
+                                       keep_side=float(self.fd_keep))
         alternate = self.fd_alternate and self.gradient != "central"
         if self.gradient == "least_squares":
             return LeastSquaresGradient(FiniteDifferenceGradient(steps, alternate=alternate), radius=2.0 * steps,
