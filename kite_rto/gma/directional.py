@@ -187,16 +187,21 @@ class DirectionalGradient(GradientEstimator):
         the direction; else the sign that keeps more (``prefer`` first)."""
         points = []
         for d in self.U.T:
-            full = self.coordinates(self.step * d)
             cands = [np.clip(c_k + sign * self.step * d, lb, ub) for sign in (prefer, -prefer)]
-            kept = [abs(float(self.coordinates(c - c_k) @ full)) for c in cands]
-            if self.keep_side < 1.0 and kept[0] >= self.keep_side * float(full @ full):
+            kept = [self._kept(c_k, c, d) for c in cands]
+            if self.keep_side < 1.0 and kept[0] >= self.keep_side:
                 points.append(cands[0])
                 continue
             # the other sign only when it keeps more than rounding does (both full steps inside the box differ
             # by ~1e-16, and argmax would pick a side at random)
             points.append(cands[1] if kept[1] > kept[0] * (1.0 + 1e-9) else cands[0])
         return points
+
+    def _kept(self, c_k, x, d) -> float:
+        """The fraction of the direction's step ``step * d`` that the point ``x`` keeps: its displacement from
+        ``c_k`` projected on the step, in direction coordinates (1 for the whole step, less when clipped)."""
+        full = self.coordinates(self.step * d)
+        return abs(float(self.coordinates(x - c_k) @ full)) / float(full @ full)
 
     def _leading(self, c_k, lb, ub, toward) -> list:
         """``lead``'s points: per direction the side of ``toward`` (scaled by the box width) when its clipped
@@ -206,10 +211,8 @@ class DirectionalGradient(GradientEstimator):
         points = []
         for j, d in enumerate(self.U.T):
             sign = float(np.sign((d / w) @ (toward / w)))
-            full = self.coordinates(self.step * d)
             x = np.clip(c_k + sign * self.step * d, lb, ub)
-            kept = abs(float(self.coordinates(x - c_k) @ full)) / float(full @ full)
-            points.append(x if sign != 0.0 and kept >= 0.5 else fallback[j])
+            points.append(x if sign != 0.0 and self._kept(c_k, x, d) >= 0.5 else fallback[j])
         return points
 
     def estimate(self, c_k, nominal: PlantPoint, new: Sequence[PlantPoint], past=(), model=None):

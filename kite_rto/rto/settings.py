@@ -187,7 +187,7 @@ class KiteRTOSettings:
                 raise ValueError("KiteRTOSettings.gradient_estimator: 'directional' needs the privileged directions")
             return DirectionalGradient(directions, step=float(np.ravel(self.fd_step)[0]), reuse=False,
                                        alternate=self.fd_alternate, reflect=self.fd_reflect, lead=self.fd_lead,
-                                       keep_side=float(self.fd_keep))
+                                       keep_side=self.fd_keep)
         alternate = self.fd_alternate and self.gradient != "central"
         if self.gradient == "least_squares":
             return LeastSquaresGradient(FiniteDifferenceGradient(steps, alternate=alternate), radius=2.0 * steps,
