@@ -17,7 +17,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from kite_rto.gma import GMA, FiniteDifferenceGradient, GMASettings, ModelProblem, run_offline
+from kite_rto.gma import GMA, DirectionalGradient, FiniteDifferenceGradient, GMASettings, ModelProblem, run_offline
 from kite_rto.gma.safety import observed_curvature, safe_fraction
 
 
@@ -92,6 +92,7 @@ def test_observed_curvature_from_the_steps_end():
     ("safe_tolerance", [0.1, -0.1], r"safe_tolerance=\[0.1, -0.1\]"),
     ("safe_adapt_min_step", float("inf"), r"safe_adapt_min_step=inf"),
     ("safe_both_ends", 1, r"safe_both_ends=1: expected True or False"),
+    ("safe_model_slope", "yes", r"safe_model_slope='yes': expected True or False"),
 ])
 def test_safe_settings_are_validated(field, value, expected):
     with pytest.raises(ValueError, match=expected):
@@ -168,3 +169,32 @@ def test_a_backward_perturbation_needs_the_truncation_bound_to_keep_the_step_saf
         assert any("truncation bound +1" in n for n in rec.notes)
     else:
         assert g_next > 0.5
+
+
+@pytest.mark.parametrize("model_slope", [False, True])
+def test_the_models_slope_keeps_a_step_safe_that_a_backward_secant_would_not(model_slope):
+    """Model: minimize (c - 1)^2 on [0, 1] subject to c - 0.9 <= 0; plant constraint 5 (c - 0.7)^2 - 0.1, whose
+    slope at c0 = 0.8 is 1, the model's. The perturbation of 0.3 does not fit forwards and is flown backwards, to
+    0.5: its secant -0.5 has the wrong sign, the modified constraint allows c >= 0.7 and the step goes to the
+    upper bound. The curvature bound M = 10 is the plant's own. With the estimated slope alone the safe step takes
+    0.81 of it and the plant's constraint ends at +0.24; with ``safe_model_slope`` the change is predicted with the
+    model's slope 1 and the step ends on the plant's constraint, at 0.7 + sqrt(0.02)."""
+    u = ca.SX.sym("u", 1)
+    pr = ModelProblem(u=u, cost=(u[0] - 1.0) ** 2, constraints=u[0] - 0.9, outputs=u, lbu=[0], ubu=[1], u0=[0.8],
+                      c_lb=[0], c_ub=[1], name="model_slope")
+
+    def plant1(c):
+        return (float(c[0]) - 1.0) ** 2, np.array([5.0 * (float(c[0]) - 0.7) ** 2 - 0.1])
+    s = GMASettings(filter_gain=1.0, trust_radius=0.4, trust_adapt=False, safe_curvature=10.0, safe_sigma=0.0,
+                    safe_tolerance=0.0, safe_model_slope=model_slope)
+    gma = GMA(pr, s, DirectionalGradient([[1.0]], step=0.3, reuse=False), c0=[0.8])
+    run_offline(gma, plant1, 1)
+    rec = gma.records[0]
+    assert rec.jac_constraints.ravel()[0] == pytest.approx(-0.5)      # the backward secant over [0.5, 0.8]
+    g_next = plant1(rec.c_next)[1][0]
+    if model_slope:
+        assert rec.c_next[0] == pytest.approx(0.7 + np.sqrt(0.02), abs=1e-6) and g_next <= 1e-9
+        assert any("model's change +0.2" in n for n in rec.notes)
+    else:
+        assert rec.c_next[0] == pytest.approx(0.8 + 0.2 * (0.1 + np.sqrt(0.05)) / 0.4, abs=1e-6)
+        assert g_next > 0.2

@@ -422,7 +422,8 @@ class GMA:
             if s.safe_filtered and np.all(np.isfinite(model.jac_g)):     # the modified problem's own Jacobian
                 safe_est = replace(est, constraints=np.asarray(model.jac_g, float).reshape(pr.n_g, pr.n_c)
                                    + prop.modifiers.mu.reshape(pr.n_g, pr.n_c))
-            alpha = self._safe_alpha(step, nominal, safe_est, notes)
+            model_jac = np.asarray(model.jac_g, float).reshape(pr.n_g, pr.n_c) if s.safe_model_slope else None
+            alpha = self._safe_alpha(step, nominal, safe_est, notes, model_jac)
             step = alpha * step
             c_next = c_k + step
         self._adapt_trust_region(step, prop.c_star - c_k, radius_abs)
@@ -574,10 +575,12 @@ class GMA:
             notes.append(f"structure check: {len(hits)} direction(s) restored from the next iteration on")
         return est, [d.tolist() for _, d in hits]
 
-    def _safe_alpha(self, step: np.ndarray, nominal: PlantPoint, est: GradientEstimate, notes: list[str]
-                    ) -> float:
+    def _safe_alpha(self, step: np.ndarray, nominal: PlantPoint, est: GradientEstimate, notes: list[str],
+                    model_jac: np.ndarray | None = None) -> float:
         """The largest ``alpha`` in [0, 1] such that ``alpha * step`` keeps the predicted plant constraints within
-        ``safe_tolerance`` (:mod:`~kite_rto.gma.safety`); noted when it is below 1."""
+        ``safe_tolerance`` (:mod:`~kite_rto.gma.safety`); noted when it is below 1. With ``model_jac`` (the model's
+        own constraint Jacobian at ``c_k``, ``GMASettings.safe_model_slope``) each constraint's change is predicted
+        with the worse of the estimated and the model's slope."""
         s, n_g, w = self.settings, self.problem.n_g, self._width
         if not np.all(np.isfinite(est.constraints)):
             notes.append("safe step: no finite constraint gradient, step not taken")
@@ -598,13 +601,19 @@ class GMA:
         trunc = np.zeros(n_g)
         if s.safe_truncation and est.displacements is not None:
             trunc = M * truncation_bound(est.displacements, step, w)
-        slope = est.constraints.reshape(n_g, -1) @ step
-        alpha, j = safe_fraction(nominal.constraints, g_std, slope + trunc, slope_std, M,
+        change = est.constraints.reshape(n_g, -1) @ step
+        slope = change + trunc
+        use_model = model_jac is not None and bool(np.all(np.isfinite(model_jac)))
+        if use_model:
+            model_change = model_jac @ step
+            slope = np.maximum(slope, model_change)
+        alpha, j = safe_fraction(nominal.constraints, g_std, slope, slope_std, M,
                                  float(np.sum((step / w) ** 2)), s.safe_sigma, tol)
         if j is not None:
             notes.append(f"safe step: scaled by {alpha:.3g} (g[{j}] = {nominal.constraints[j]:+.4g}, predicted "
-                         f"change {float(slope[j]):+.4g}, "
+                         f"change {float(change[j]):+.4g}, "
                          + (f"truncation bound {trunc[j]:+.4g}, " if s.safe_truncation else "")
+                         + (f"model's change {float(model_change[j]):+.4g}, " if use_model else "")
                          + f"curvature bound {M[j]:.4g})" + ("; trust region shrunk" if s.safe_shrink else ""))
         return alpha
 
