@@ -92,7 +92,8 @@ def test_observed_curvature_from_the_steps_end():
     ("safe_tolerance", [0.1, -0.1], r"safe_tolerance=\[0.1, -0.1\]"),
     ("safe_adapt_min_step", float("inf"), r"safe_adapt_min_step=inf"),
     ("safe_both_ends", 1, r"safe_both_ends=1: expected True or False"),
-    ("safe_model_slope", "yes", r"safe_model_slope='yes': expected True or False"),
+    ("safe_model_slope", "yes", r"safe_model_slope='yes': expected True, False or 'extrapolated'"),
+    ("safe_model_slope", 1, r"safe_model_slope=1: expected True, False or 'extrapolated'"),
 ])
 def test_safe_settings_are_validated(field, value, expected):
     with pytest.raises(ValueError, match=expected):
@@ -171,14 +172,15 @@ def test_a_backward_perturbation_needs_the_truncation_bound_to_keep_the_step_saf
         assert g_next > 0.5
 
 
-@pytest.mark.parametrize("model_slope", [False, True])
+@pytest.mark.parametrize("model_slope", [False, True, "extrapolated"])
 def test_the_models_slope_keeps_a_step_safe_that_a_backward_secant_would_not(model_slope):
     """Model: minimize (c - 1)^2 on [0, 1] subject to c - 0.9 <= 0; plant constraint 5 (c - 0.7)^2 - 0.1, whose
     slope at c0 = 0.8 is 1, the model's. The perturbation of 0.3 does not fit forwards and is flown backwards, to
     0.5: its secant -0.5 has the wrong sign, the modified constraint allows c >= 0.7 and the step goes to the
     upper bound. The curvature bound M = 10 is the plant's own. With the estimated slope alone the safe step takes
     0.81 of it and the plant's constraint ends at +0.24; with ``safe_model_slope`` the change is predicted with the
-    model's slope 1 and the step ends on the plant's constraint, at 0.7 + sqrt(0.02)."""
+    model's slope 1 and the step ends on the plant's constraint, at 0.7 + sqrt(0.02); ``"extrapolated"`` does the
+    same, the step being made of the backward difference with weight -2/3."""
     u = ca.SX.sym("u", 1)
     pr = ModelProblem(u=u, cost=(u[0] - 1.0) ** 2, constraints=u[0] - 0.9, outputs=u, lbu=[0], ubu=[1], u0=[0.8],
                       c_lb=[0], c_ub=[1], name="model_slope")
@@ -198,3 +200,26 @@ def test_the_models_slope_keeps_a_step_safe_that_a_backward_secant_would_not(mod
     else:
         assert rec.c_next[0] == pytest.approx(0.8 + 0.2 * (0.1 + np.sqrt(0.05)) / 0.4, abs=1e-6)
         assert g_next > 0.2
+
+
+@pytest.mark.parametrize("model_slope, c1", [(False, 0.7), ("extrapolated", 0.7), (True, 0.6)])
+def test_extrapolated_uses_the_models_slope_only_across_c_k(model_slope, c1):
+    """Model constraint 3 c - 2.9, plant c - 1.2 (never binding in [0, 1]); from c0 = 0.3 the forward difference
+    over [0.3, 0.6] measures the plant's slope 1 and the step goes to the trust region's edge, 0.7. The model's
+    change over it, 1.2, exceeds the room 0.9: ``True`` cuts the step to 0.75 of it; ``"extrapolated"`` does not,
+    the step lying on the side of the measured difference."""
+    u = ca.SX.sym("u", 1)
+    pr = ModelProblem(u=u, cost=(u[0] - 1.0) ** 2, constraints=3.0 * u[0] - 2.9, outputs=u, lbu=[0], ubu=[1],
+                      u0=[0.3], c_lb=[0], c_ub=[1], name="model_slope_forward")
+    s = GMASettings(filter_gain=1.0, trust_radius=0.4, trust_adapt=False, safe_curvature=0.0, safe_sigma=0.0,
+                    safe_tolerance=0.0, safe_model_slope=model_slope)
+    gma = GMA(pr, s, DirectionalGradient([[1.0]], step=0.3, reuse=False), c0=[0.3])
+    run_offline(gma, lambda c: ((float(c[0]) - 1.0) ** 2, np.array([float(c[0]) - 1.2])), 1)
+    assert gma.records[0].c_next[0] == pytest.approx(c1, abs=1e-6)
+
+
+def test_step_weights_are_negative_for_a_difference_behind_the_step():
+    from kite_rto.gma.safety import step_weights
+    np.testing.assert_allclose(step_weights([[-0.3]], [0.2], [1.0]), [-2 / 3])
+    np.testing.assert_allclose(step_weights([[0.5, 0.0], [0.0, -0.25]], [0.1, 0.1], [1.0, 0.5]), [0.2, -0.4])
+    assert step_weights(np.zeros((0, 2)), [0.1, 0.1], [1.0, 1.0]).size == 0

@@ -25,7 +25,7 @@ from .noise_filter import noise_gain
 from .problem import ModelProblem
 from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
 from .settings import GMASettings, per_setpoint
-from .safety import observed_curvature, safe_fraction, truncation_bound
+from .safety import observed_curvature, safe_fraction, step_weights, truncation_bound
 from .kkt import kkt_test
 from .structure import bound_side, excluded_directions, structure_plan, structure_test
 
@@ -422,7 +422,10 @@ class GMA:
             if s.safe_filtered and np.all(np.isfinite(model.jac_g)):     # the modified problem's own Jacobian
                 safe_est = replace(est, constraints=np.asarray(model.jac_g, float).reshape(pr.n_g, pr.n_c)
                                    + prop.modifiers.mu.reshape(pr.n_g, pr.n_c))
-            model_jac = np.asarray(model.jac_g, float).reshape(pr.n_g, pr.n_c) if s.safe_model_slope else None
+            model_jac = None
+            if s.safe_model_slope is True or (s.safe_model_slope == "extrapolated"
+                                              and _extrapolates(est, step, self._width)):
+                model_jac = np.asarray(model.jac_g, float).reshape(pr.n_g, pr.n_c)
             alpha = self._safe_alpha(step, nominal, safe_est, notes, model_jac)
             step = alpha * step
             c_next = c_k + step
@@ -794,6 +797,14 @@ class GMA:
         hit = (np.abs(proposed) >= 0.999 * radius_abs) & ~flip
         self._shrink_radius(flip)
         self._radius = np.where(hit, np.minimum(self._radius * s.trust_grow, self._radius0), self._radius)
+
+
+def _extrapolates(est: GradientEstimate, step: np.ndarray, width: np.ndarray) -> bool:
+    """The estimate predicts the change over ``step`` with a negative weight on some fitted point
+    (:func:`~kite_rto.gma.safety.step_weights`): a difference taken on the other side of ``c_k`` than the step."""
+    if est.displacements is None or not np.any(step):
+        return False
+    return bool(np.any(step_weights(est.displacements, step, width) < -1e-9))
 
 
 def _finite_modifiers(record: IterationRecord) -> bool:

@@ -22,15 +22,14 @@ import math
 
 import numpy as np
 
-__all__ = ["safe_fraction", "observed_curvature", "truncation_bound"]
+__all__ = ["safe_fraction", "observed_curvature", "truncation_bound", "step_weights"]
 
 
-def truncation_bound(displacements, step, width) -> float:
-    """``0.5 sum_i |a_i| |p_i|^2`` (squared box widths): how far, per unit of curvature bound ``M``, the
-    truncation errors of a gradient fitted to differences over the points ``p_i = displacements[i] / width``
-    can move its prediction of the change over ``step`` (``d = step / width = sum_i a_i p_i``, ``a`` the
-    least-squares combination). Each difference ``f(c_k + p_i) - f(c_k)`` is the gradient's term plus at most
-    ``0.5 M |p_i|^2``; a fit that is linear in those differences passes them on with weights ``a_i``.
+def step_weights(displacements, step, width) -> np.ndarray:
+    """``a`` (m,): the least-squares combination ``d = sum_i a_i p_i`` of the fitted points ``p_i =
+    displacements[i] / width`` that makes up the step ``d = step / width`` (box widths). A gradient fitted to
+    differences over those points predicts the change over the step with these weights; a negative ``a_i``
+    extrapolates a difference taken on the other side of ``c_k`` than the step.
 
     Args:
         displacements: ``c_i - c_k`` (m, n_c), setpoint units.
@@ -40,8 +39,21 @@ def truncation_bound(displacements, step, width) -> float:
     w = np.asarray(width, float)
     P = np.asarray(displacements, float).reshape(-1, w.size) / w
     if P.shape[0] == 0:
-        return 0.0
+        return np.zeros(0)
     a, *_ = np.linalg.lstsq(P.T, np.asarray(step, float) / w, rcond=None)
+    return a
+
+
+def truncation_bound(displacements, step, width) -> float:
+    """``0.5 sum_i |a_i| |p_i|^2`` (squared box widths): how far, per unit of curvature bound ``M``, the
+    truncation errors of a gradient fitted to differences over the points ``p_i = displacements[i] / width``
+    can move its prediction of the change over ``step`` (``a`` from :func:`step_weights`). Each difference
+    ``f(c_k + p_i) - f(c_k)`` is the gradient's term plus at most ``0.5 M |p_i|^2``; a fit that is linear in those
+    differences passes them on with weights ``a_i``. Arguments as :func:`step_weights`'s.
+    """
+    w = np.asarray(width, float)
+    P = np.asarray(displacements, float).reshape(-1, w.size) / w
+    a = step_weights(displacements, step, width)
     return 0.5 * float(np.abs(a) @ np.sum(P ** 2, axis=1))
 
 

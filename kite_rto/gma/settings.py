@@ -209,7 +209,10 @@ class GMASettings:
         safe_model_slope: predict each constraint's change over the step with the worse (larger) of the
             estimated plant slope and the model's own ``jac_g @ step`` at ``c_k``: a measured secant taken on the
             other side of ``c_k`` than the step, through a curved region, can flip the sign the model has right,
-            and the step then runs into the constraint it was predicted to leave. Off by default.
+            and the step then runs into the constraint it was predicted to leave. ``"extrapolated"``: only when
+            the estimate extrapolates, i.e. some fitted point's weight in the step is negative
+            (:func:`~kite_rto.gma.safety.step_weights`: a difference taken on the other side of ``c_k``). Off
+            (False) by default.
         safe_shrink: shrink the trust radius (by ``trust_shrink``) whenever a safe step shortens the filtered
             step (True, default); False leaves the radius to ``trust_adapt``: the safe step already limits that
             step, and shrinking as well compounds, over iterations, to the smallest radius.
@@ -282,7 +285,7 @@ class GMASettings:
     safe_filtered: bool = False
     safe_truncation: bool = False
     safe_both_ends: bool = False
-    safe_model_slope: bool = False
+    safe_model_slope: bool | str = False
     noise_ratio: float = 0.5
     max_repeats_noise: int = 0
     bound_sigma: float | None = None
@@ -355,7 +358,10 @@ class GMASettings:
         _check_bool("safe_filtered", self.safe_filtered)
         _check_bool("safe_truncation", self.safe_truncation)
         _check_bool("safe_both_ends", self.safe_both_ends)
-        _check_bool("safe_model_slope", self.safe_model_slope)
+        if self.safe_model_slope not in (False, True, "extrapolated") or not isinstance(self.safe_model_slope,
+                                                                                     (bool, str)):
+            raise ValueError(f"GMASettings.safe_model_slope={self.safe_model_slope!r}: expected True, False or "
+                             "'extrapolated'")
         _check_bool("safe_shrink", self.safe_shrink)
         _check("noise_ratio", self.noise_ratio, 0.0, None, low_open=True)
         _check_int("max_repeats_noise", self.max_repeats_noise, 0, " (0 = off)")
