@@ -418,14 +418,9 @@ class GMA:
         step = c_next - c_k
         unscaled, alpha = step.copy(), 1.0
         if prop.decision is Decision.STEP and pr.n_g and s.safe_curvature is not None:
-            safe_est = est
-            if s.safe_filtered and np.all(np.isfinite(model.jac_g)):     # the modified problem's own Jacobian
-                safe_est = replace(est, constraints=np.asarray(model.jac_g, float).reshape(pr.n_g, pr.n_c)
-                                   + prop.modifiers.mu.reshape(pr.n_g, pr.n_c))
-            model_jac = None
-            if s.safe_model_slope is True or (s.safe_model_slope == "extrapolated"
-                                              and _extrapolates(est, step, self._width)):
-                model_jac = np.asarray(model.jac_g, float).reshape(pr.n_g, pr.n_c)
+            safe_est, model_jac = est, np.asarray(model.jac_g, float).reshape(pr.n_g, pr.n_c)
+            if s.safe_filtered and np.all(np.isfinite(model_jac)):     # the modified problem's own Jacobian
+                safe_est = replace(est, constraints=model_jac + prop.modifiers.mu.reshape(pr.n_g, pr.n_c))
             alpha = self._safe_alpha(step, nominal, safe_est, notes, model_jac)
             step = alpha * step
             c_next = c_k + step
@@ -581,9 +576,10 @@ class GMA:
     def _safe_alpha(self, step: np.ndarray, nominal: PlantPoint, est: GradientEstimate, notes: list[str],
                     model_jac: np.ndarray | None = None) -> float:
         """The largest ``alpha`` in [0, 1] such that ``alpha * step`` keeps the predicted plant constraints within
-        ``safe_tolerance`` (:mod:`~kite_rto.gma.safety`); noted when it is below 1. With ``model_jac`` (the model's
-        own constraint Jacobian at ``c_k``, ``GMASettings.safe_model_slope``) each constraint's change is predicted
-        with the worse of the estimated and the model's slope."""
+        ``safe_tolerance`` (:mod:`~kite_rto.gma.safety`); noted when it is below 1. ``model_jac`` is the model's own
+        constraint Jacobian at ``c_k``: with ``GMASettings.safe_model_slope`` (always, or where the step
+        extrapolates the estimate) each constraint's change is predicted with the worse of the estimated and the
+        model's slope."""
         s, n_g, w = self.settings, self.problem.n_g, self._width
         if not np.all(np.isfinite(est.constraints)):
             notes.append("safe step: no finite constraint gradient, step not taken")
@@ -606,7 +602,9 @@ class GMA:
             trunc = M * truncation_bound(est.displacements, step, w)
         change = est.constraints.reshape(n_g, -1) @ step
         slope = change + trunc
-        use_model = model_jac is not None and bool(np.all(np.isfinite(model_jac)))
+        mode = s.safe_model_slope
+        use_model = (model_jac is not None and bool(np.all(np.isfinite(model_jac)))
+                     and (mode is True or (mode == "extrapolated" and _extrapolates(est, step, w))))
         if use_model:
             model_change = model_jac @ step
             slope = np.maximum(slope, model_change)

@@ -358,8 +358,7 @@ class GMASettings:
         _check_bool("safe_filtered", self.safe_filtered)
         _check_bool("safe_truncation", self.safe_truncation)
         _check_bool("safe_both_ends", self.safe_both_ends)
-        if self.safe_model_slope not in (False, True, "extrapolated") or not isinstance(self.safe_model_slope,
-                                                                                     (bool, str)):
+        if not (isinstance(self.safe_model_slope, bool) or self.safe_model_slope == "extrapolated"):
             raise ValueError(f"GMASettings.safe_model_slope={self.safe_model_slope!r}: expected True, False or "
                              "'extrapolated'")
         _check_bool("safe_shrink", self.safe_shrink)
