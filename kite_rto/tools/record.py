@@ -15,8 +15,9 @@ Log time = simulated time (``--log-time sim``, the default): a message's header 
 one without (rule in :mod:`kite_rto.tools.record_time`), so Foxglove's and PlotJuggler's timeline is the flight's;
 publish time = wall receive time (ns). ``--log-time wall`` logs the wall receive time instead, as ``ros2 bag
 record`` without ``--use-sim-time``. Each sample is recorded once (the lockstep plant's re-publications of a sample
-are skipped). The parameters of every node in the graph are stored as MCAP ``Metadata`` records, one per node
-(name = the node's full name, e.g. ``/plant``; fetched through its ``get_parameters`` service when the recorder
+are skipped); samples that never arrived are counted and reported (the ``wrote`` line and a ``kite_record_gaps``
+metadata record: per topic the number missing and the largest gap). The parameters of every node in the graph are
+stored as MCAP ``Metadata`` records, one per node (name = the node's full name, e.g. ``/plant``; fetched through its ``get_parameters`` service when the recorder
 first sees it), and one ``kite_record`` record says how the file was written.
 """
 from __future__ import annotations
@@ -320,13 +321,18 @@ def _make_node(args):
                 request_exit(self, 0)
 
         def destroy_node(self):
+            gaps = self.rec.clock.gaps
+            self.recording.add_metadata("kite_record_gaps", {      # how complete the file is, for its readers
+                T.graph_name(t): f"{n} missing; largest gap {a} .. {b} ns"
+                for t, (n, (a, b)) in gaps.report().items()} or {"all": "no sample missing"})
             self.recording.close()
             counts = ", ".join(f"{T.graph_name(t)} {n}" for t, n in self.recording.counts.items() if n)
             dup = sum(self.rec.clock.duplicates.values())
             nodes = len(self.params.done) if hasattr(self, "params") else 0
             print(f"[kite_record] wrote {self.recording.total} messages to {args.out}"
                   + (f" ({counts})" if counts else "")
-                  + f"; log time {args.log_time}; {dup} re-published samples skipped; parameters of {nodes} nodes",
+                  + f"; log time {args.log_time}; {dup} re-published samples skipped; "
+                  + gaps.summary(T.graph_name) + f"; parameters of {nodes} nodes",
                   file=sys.stderr, flush=True)
             return super().destroy_node()
 

@@ -16,6 +16,10 @@ Each sample is recorded once: on the per-sample topics (:data:`PER_SAMPLE`) a me
 one of its topic is a re-publication of the same sample (the lockstep plant re-publishes a sample until it is
 answered, the controller and optimizer answer each copy) and is skipped. A stamp lower than the previous one (a
 restarted plant) is recorded.
+
+Samples that never arrived are counted (:class:`SampleGaps`): a recorder starved of CPU for longer than its
+publishers' history (1000 samples, 20 s of flight in lockstep) loses a block of samples, and the recording says so
+instead of looking complete.
 """
 from __future__ import annotations
 
@@ -23,7 +27,7 @@ import struct
 
 from ..nodes import topics as T
 
-__all__ = ["PER_SAMPLE", "SAMPLE_STAMPED", "WALL_STAMP_GAP", "LOG_TIME_MODES", "cdr_stamp", "SimLogTime"]
+__all__ = ["PER_SAMPLE", "SAMPLE_STAMPED", "WALL_STAMP_GAP", "LOG_TIME_MODES", "cdr_stamp", "SimLogTime", "SampleGaps"]
 
 PER_SAMPLE = frozenset({T.CLOCK, T.STATE, T.POSITION, T.TENSION, T.WIND, T.WIND_ESTIMATE, T.STEERING, T.SYNC})
 """Topics with one message per sample, stamped with the sample's time: duplicates are skipped."""
@@ -80,6 +84,7 @@ class SimLogTime:
         self.clock_ns = 0
         self._last: dict = {}
         self.duplicates: dict = {}
+        self.gaps = SampleGaps()
         self.replaced = 0               # messages logged at the latest /clock instead of their stamp
 
     def log_time(self, topic: str, data: bytes, wall_ns: int) -> int | None:
@@ -96,6 +101,7 @@ class SimLogTime:
             if self._last.get(topic) == stamp:
                 self.duplicates[topic] = self.duplicates.get(topic, 0) + 1
                 return None
+            self.gaps.add(topic, self._last.get(topic), stamp)
             self._last[topic] = stamp
         if topic == T.CLOCK and stamp is not None:
             self.clock_ns = stamp
@@ -107,3 +113,55 @@ class SimLogTime:
                 self.replaced += 1
             return self.clock_ns
         return stamp
+
+
+class SampleGaps:
+    """Samples missing inside the recorded span of each per-sample topic, from the steps between its stamps.
+
+    The sample period of a topic is its smallest step; a step of n periods (rounded) means n - 1 samples missed.
+    Only the distinct steps are kept (with their count and the first place each occurred), so a long recording costs
+    a few entries. A step back (a restarted plant) starts a new span. Samples after the last one received (a plant
+    that exits right after publishing) are not seen.
+    """
+
+    def __init__(self):
+        self._steps: dict = {}          # topic -> {step ns: [count, first stamp before the step]}
+
+    def add(self, topic: str, previous: int | None, stamp: int) -> None:
+        """Note the step from ``previous`` to ``stamp`` (ns) on ``topic`` (nothing before its first sample)."""
+        if previous is None or stamp <= previous:
+            return
+        entry = self._steps.setdefault(topic, {}).setdefault(stamp - previous, [0, previous])
+        entry[0] += 1
+
+    def period_ns(self, topic: str) -> int | None:
+        """The topic's sample period (its smallest step, ns), None before its second sample."""
+        steps = self._steps.get(topic)
+        return min(steps) if steps else None
+
+    def missing(self, topic: str) -> int:
+        """Samples of ``topic`` missing between the first and the last received."""
+        period = self.period_ns(topic)
+        if period is None:
+            return 0
+        return sum(n * (round(step / period) - 1) for step, (n, _) in self._steps[topic].items())
+
+    def largest(self, topic: str) -> tuple[int, int] | None:
+        """(last stamp before, first stamp after) of the topic's longest gap (ns), None without a gap."""
+        if not self.missing(topic):
+            return None
+        step = max(self._steps[topic])
+        start = self._steps[topic][step][1]
+        return start, start + step
+
+    def report(self) -> dict:
+        """Topic -> (missing samples, largest gap) for every topic that misses some."""
+        return {t: (self.missing(t), self.largest(t)) for t in sorted(self._steps) if self.missing(t)}
+
+    def summary(self, name=lambda t: t) -> str:
+        """One line: ``no sample missing`` or, per topic, the count and the largest gap in s."""
+        rep = self.report()
+        if not rep:
+            return "no sample missing"
+        return "samples missing: " + ", ".join(
+            f"{name(t)} {n} (largest gap {a / 1e9:g} .. {b / 1e9:g} s)" for t, (n, (a, b)) in rep.items())
