@@ -86,8 +86,9 @@ def test_missing_samples_are_counted_from_the_steps_between_stamps():
     assert gaps.missing(T.STATE) == 6 and gaps.missing(T.WIND) == 0 and gaps.missing(T.CLOCK) == 0
     assert gaps.largest(T.STATE) == (60 * ms, 160 * ms) and gaps.largest(T.WIND) is None
     assert gaps.report() == {T.STATE: (6, (60 * ms, 160 * ms))}
-    assert gaps.summary(T.graph_name) == "samples missing: /kite/state 6 (largest gap 0.06 .. 0.16 s)"
-    assert SampleGaps().summary() == "no sample missing"
+    assert SampleGaps.summary(gaps.report(), T.graph_name) == \
+        "samples missing: /kite/state 6 (largest gap 0.06 .. 0.16 s)"
+    assert SampleGaps.summary(SampleGaps().report()) == "no sample missing"
     lt = SimLogTime({T.STATE: "sensor_msgs/msg/JointState"})            # the recorder's log-time rule feeds it
     for t in (0, 20, 20, 80):                                           # a re-publication is not a step
         msg = _example(JointState)

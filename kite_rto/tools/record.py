@@ -17,8 +17,9 @@ publish time = wall receive time (ns). ``--log-time wall`` logs the wall receive
 record`` without ``--use-sim-time``. Each sample is recorded once (the lockstep plant's re-publications of a sample
 are skipped); samples that never arrived are counted and reported (the ``wrote`` line and a ``kite_record_gaps``
 metadata record: per topic the number missing and the largest gap). The parameters of every node in the graph are
-stored as MCAP ``Metadata`` records, one per node (name = the node's full name, e.g. ``/plant``; fetched through its ``get_parameters`` service when the recorder
-first sees it), and one ``kite_record`` record says how the file was written.
+stored as MCAP ``Metadata`` records, one per node (name = the node's full name, e.g. ``/plant``; fetched through its
+``get_parameters`` service when the recorder first sees it), and one ``kite_record`` record says how the file was
+written.
 """
 from __future__ import annotations
 
@@ -49,7 +50,7 @@ from ..nodes.namespace import add_namespace_option, namespace_args
 from ..nodes.interface import LAP_HISTORY, LATCHED, MEASUREMENTS, RELIABLE_10
 from ..nodes.spin import request_exit, run_node
 from .graph_params import GraphParameters
-from .record_time import LOG_TIME_MODES, PER_SAMPLE, SimLogTime
+from .record_time import LOG_TIME_MODES, PER_SAMPLE, SampleGaps, SimLogTime
 
 __all__ = ["TOPICS", "topic_type", "type_name", "message_definition", "generated_definition", "qos_yaml",
            "McapRecording", "RecordNode", "main"]
@@ -322,9 +323,10 @@ def _make_node(args):
 
         def destroy_node(self):
             gaps = self.rec.clock.gaps
+            missing = gaps.report()
             self.recording.add_metadata("kite_record_gaps", {      # how complete the file is, for its readers
                 T.graph_name(t): f"{n} missing; largest gap {a} .. {b} ns"
-                for t, (n, (a, b)) in gaps.report().items()} or {"all": "no sample missing"})
+                for t, (n, (a, b)) in missing.items()} or {"all": "no sample missing"})
             self.recording.close()
             counts = ", ".join(f"{T.graph_name(t)} {n}" for t, n in self.recording.counts.items() if n)
             dup = sum(self.rec.clock.duplicates.values())
@@ -332,7 +334,7 @@ def _make_node(args):
             print(f"[kite_record] wrote {self.recording.total} messages to {args.out}"
                   + (f" ({counts})" if counts else "")
                   + f"; log time {args.log_time}; {dup} re-published samples skipped; "
-                  + gaps.summary(T.graph_name) + f"; parameters of {nodes} nodes",
+                  + SampleGaps.summary(missing, T.graph_name) + f"; parameters of {nodes} nodes",
                   file=sys.stderr, flush=True)
             return super().destroy_node()
 

@@ -98,10 +98,11 @@ class SimLogTime:
             else:
                 stamp = cdr_stamp(data, kind[1])
         if topic in PER_SAMPLE and stamp is not None:
-            if self._last.get(topic) == stamp:
+            last = self._last.get(topic)
+            if last == stamp:
                 self.duplicates[topic] = self.duplicates.get(topic, 0) + 1
                 return None
-            self.gaps.add(topic, self._last.get(topic), stamp)
+            self.gaps.add(topic, last, stamp)
             self._last[topic] = stamp
         if topic == T.CLOCK and stamp is not None:
             self.clock_ns = stamp
@@ -156,12 +157,12 @@ class SampleGaps:
 
     def report(self) -> dict:
         """Topic -> (missing samples, largest gap) for every topic that misses some."""
-        return {t: (self.missing(t), self.largest(t)) for t in sorted(self._steps) if self.missing(t)}
+        return {t: (n, self.largest(t)) for t in sorted(self._steps) if (n := self.missing(t))}
 
-    def summary(self, name=lambda t: t) -> str:
-        """One line: ``no sample missing`` or, per topic, the count and the largest gap in s."""
-        rep = self.report()
-        if not rep:
+    @staticmethod
+    def summary(report: dict, name=lambda t: t) -> str:
+        """One line from a :meth:`report`: ``no sample missing`` or, per topic, the count and the largest gap in s."""
+        if not report:
             return "no sample missing"
         return "samples missing: " + ", ".join(
-            f"{name(t)} {n} (largest gap {a / 1e9:g} .. {b / 1e9:g} s)" for t, (n, (a, b)) in rep.items())
+            f"{name(t)} {n} (largest gap {a / 1e9:g} .. {b / 1e9:g} s)" for t, (n, (a, b)) in report.items())
