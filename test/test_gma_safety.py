@@ -92,8 +92,8 @@ def test_observed_curvature_from_the_steps_end():
     ("safe_tolerance", [0.1, -0.1], r"safe_tolerance=\[0.1, -0.1\]"),
     ("safe_adapt_min_step", float("inf"), r"safe_adapt_min_step=inf"),
     ("safe_both_ends", 1, r"safe_both_ends=1: expected True or False"),
-    ("safe_model_slope", "yes", r"safe_model_slope='yes': expected True, False or 'extrapolated'"),
-    ("safe_model_slope", 1, r"safe_model_slope=1: expected True, False or 'extrapolated'"),
+    ("safe_model_slope", "yes", r"safe_model_slope='yes': expected True, False, 'extrapolated' or 'terms'"),
+    ("safe_model_slope", 1, r"safe_model_slope=1: expected True, False, 'extrapolated' or 'terms'"),
 ])
 def test_safe_settings_are_validated(field, value, expected):
     with pytest.raises(ValueError, match=expected):
@@ -172,15 +172,15 @@ def test_a_backward_perturbation_needs_the_truncation_bound_to_keep_the_step_saf
         assert g_next > 0.5
 
 
-@pytest.mark.parametrize("model_slope", [False, True, "extrapolated"])
+@pytest.mark.parametrize("model_slope", [False, True, "extrapolated", "terms"])
 def test_the_models_slope_keeps_a_step_safe_that_a_backward_secant_would_not(model_slope):
     """Model: minimize (c - 1)^2 on [0, 1] subject to c - 0.9 <= 0; plant constraint 5 (c - 0.7)^2 - 0.1, whose
     slope at c0 = 0.8 is 1, the model's. The perturbation of 0.3 does not fit forwards and is flown backwards, to
     0.5: its secant -0.5 has the wrong sign, the modified constraint allows c >= 0.7 and the step goes to the
     upper bound. The curvature bound M = 10 is the plant's own. With the estimated slope alone the safe step takes
     0.81 of it and the plant's constraint ends at +0.24; with ``safe_model_slope`` the change is predicted with the
-    model's slope 1 and the step ends on the plant's constraint, at 0.7 + sqrt(0.02); ``"extrapolated"`` does the
-    same, the step being made of the backward difference with weight -2/3."""
+    model's slope 1 and the step ends on the plant's constraint, at 0.7 + sqrt(0.02); ``"extrapolated"`` and
+    ``"terms"`` do the same, the step being made of the backward difference with weight -2/3."""
     u = ca.SX.sym("u", 1)
     pr = ModelProblem(u=u, cost=(u[0] - 1.0) ** 2, constraints=u[0] - 0.9, outputs=u, lbu=[0], ubu=[1], u0=[0.8],
                       c_lb=[0], c_ub=[1], name="model_slope")
@@ -202,7 +202,7 @@ def test_the_models_slope_keeps_a_step_safe_that_a_backward_secant_would_not(mod
         assert g_next > 0.2
 
 
-@pytest.mark.parametrize("model_slope, c1", [(False, 0.7), ("extrapolated", 0.7), (True, 0.6)])
+@pytest.mark.parametrize("model_slope, c1", [(False, 0.7), ("extrapolated", 0.7), ("terms", 0.7), (True, 0.6)])
 def test_extrapolated_uses_the_models_slope_only_across_c_k(model_slope, c1):
     """Model constraint 3 c - 2.9, plant c - 1.2 (never binding in [0, 1]); from c0 = 0.3 the forward difference
     over [0.3, 0.6] measures the plant's slope 1 and the step goes to the trust region's edge, 0.7. The model's
@@ -216,6 +216,33 @@ def test_extrapolated_uses_the_models_slope_only_across_c_k(model_slope, c1):
     gma = GMA(pr, s, DirectionalGradient([[1.0]], step=0.3, reuse=False), c0=[0.3])
     run_offline(gma, lambda c: ((float(c[0]) - 1.0) ** 2, np.array([float(c[0]) - 1.2])), 1)
     assert gma.records[0].c_next[0] == pytest.approx(c1, abs=1e-6)
+
+
+@pytest.mark.parametrize("model_slope, c_next", [(False, (0.7, 1.0)), ("terms", (0.7, 1.0)),
+                                                  ("extrapolated", (0.3 + 0.4 * 4 / 7, 0.8 + 0.2 * 4 / 7)),
+                                                  (True, (0.3 + 0.4 * 4 / 7, 0.8 + 0.2 * 4 / 7))])
+def test_terms_use_the_models_slope_only_for_the_extrapolated_part_of_the_step(model_slope, c_next):
+    """Two setpoints in [0, 1], c0 = (0.3, 0.8), perturbations of 0.3 along each: the first is flown forwards,
+    the second does not fit and is flown backwards. Plant constraint c_0 + c_1 - 1.9 (measured exactly), model
+    3 c_0 + c_1 - 3: the model is wrong only along the forward perturbation. The step (0.4, 0.2), to the trust
+    region's and the box's edge, changes the plant's constraint by 0.6 (room 0.8); the model's change over the
+    whole step is 1.4. ``"extrapolated"`` (the step extrapolates the second difference, weight -2/3) and ``True``
+    cut it to 4/7; ``"terms"`` takes the worse slope only for that difference's part, where model and plant
+    agree (0.2), and flies the whole step."""
+    u = ca.SX.sym("u", 2)
+    pr = ModelProblem(u=u, cost=(u[0] - 1.0) ** 2 + (u[1] - 1.0) ** 2, constraints=3.0 * u[0] + u[1] - 3.0,
+                      outputs=u, lbu=[0, 0], ubu=[1, 1], u0=[0.3, 0.8], c_lb=[0, 0], c_ub=[1, 1],
+                      name="model_slope_terms")
+
+    def plant2(c):
+        return (c[0] - 1.0) ** 2 + (c[1] - 1.0) ** 2, np.array([c[0] + c[1] - 1.9])
+    s = GMASettings(filter_gain=1.0, trust_radius=0.4, trust_adapt=False, safe_curvature=0.0, safe_sigma=0.0,
+                    safe_tolerance=0.0, safe_model_slope=model_slope)
+    gma = GMA(pr, s, DirectionalGradient(np.eye(2), step=0.3, reuse=False), c0=[0.3, 0.8])
+    run_offline(gma, plant2, 1)
+    rec = gma.records[0]
+    np.testing.assert_allclose(rec.jac_constraints.ravel(), [1.0, 1.0], atol=1e-9)
+    np.testing.assert_allclose(rec.c_next, c_next, atol=1e-6)
 
 
 def test_step_weights_are_negative_for_a_difference_behind_the_step():

@@ -603,11 +603,15 @@ class GMA:
         change = est.constraints.reshape(n_g, -1) @ step
         slope = change + trunc
         mode = s.safe_model_slope
-        use_model = (model_jac is not None and bool(np.all(np.isfinite(model_jac)))
-                     and (mode is True or (mode == "extrapolated" and _extrapolates(est, step, w))))
+        usable = model_jac is not None and bool(np.all(np.isfinite(model_jac)))
+        use_model = usable and (mode is True or (mode == "extrapolated" and _extrapolates(est, step, w)))
         if use_model:
             model_change = model_jac @ step
             slope = np.maximum(slope, model_change)
+        elif usable and mode == "terms" and _extrapolates(est, step, w):
+            use_model = True
+            model_change = _pessimistic_terms(est, model_jac, step, w, n_g)
+            slope = model_change + trunc
         alpha, j = safe_fraction(nominal.constraints, g_std, slope, slope_std, M,
                                  float(np.sum((step / w) ** 2)), s.safe_sigma, tol)
         if j is not None:
@@ -795,6 +799,23 @@ class GMA:
         hit = (np.abs(proposed) >= 0.999 * radius_abs) & ~flip
         self._shrink_radius(flip)
         self._radius = np.where(hit, np.minimum(self._radius * s.trust_grow, self._radius0), self._radius)
+
+
+def _pessimistic_terms(est: GradientEstimate, model_jac: np.ndarray, step: np.ndarray, width: np.ndarray,
+                       n_g: int) -> np.ndarray:
+    """(n_g,) each constraint's predicted change over ``step``, term by term: the step is ``sum_i a_i p_i + r``
+    over the fitted points ``p_i`` (:func:`~kite_rto.gma.safety.step_weights`) plus a remainder ``r`` outside
+    their span; a term with ``a_i >= 0`` (interpolated) and the remainder are predicted with the estimated
+    Jacobian, a term with ``a_i < 0`` (a difference taken on the other side of ``c_k``, extrapolated across it) with
+    the worse (larger) of the estimated and the model's Jacobian."""
+    J = est.constraints.reshape(n_g, -1)
+    P = np.asarray(est.displacements, float).reshape(-1, step.size)
+    a = step_weights(P, step, width)
+    change = J @ (step - P.T @ a)
+    for a_i, p_i in zip(a, P):
+        measured = a_i * (J @ p_i)
+        change = change + (np.maximum(measured, a_i * (model_jac @ p_i)) if a_i < -1e-9 else measured)
+    return change
 
 
 def _extrapolates(est: GradientEstimate, step: np.ndarray, width: np.ndarray) -> bool:

@@ -358,9 +358,9 @@ class GMASettings:
         _check_bool("safe_filtered", self.safe_filtered)
         _check_bool("safe_truncation", self.safe_truncation)
         _check_bool("safe_both_ends", self.safe_both_ends)
-        if not (isinstance(self.safe_model_slope, bool) or self.safe_model_slope == "extrapolated"):
-            raise ValueError(f"GMASettings.safe_model_slope={self.safe_model_slope!r}: expected True, False or "
-                             "'extrapolated'")
+        if not (isinstance(self.safe_model_slope, bool) or self.safe_model_slope in ("extrapolated", "terms")):
+            raise ValueError(f"GMASettings.safe_model_slope={self.safe_model_slope!r}: expected True, False, "
+                             "'extrapolated' or 'terms'")
         _check_bool("safe_shrink", self.safe_shrink)
         _check("noise_ratio", self.noise_ratio, 0.0, None, low_open=True)
         _check_int("max_repeats_noise", self.max_repeats_noise, 0, " (0 = off)")
