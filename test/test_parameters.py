@@ -152,7 +152,7 @@ def test_plant_defaults_are_the_plant_config_defaults():
 def test_optimizer_defaults_build_the_kite_defaults_and_gma_switches_reach_gma():
     """The optimizer's parameter defaults build KiteRTOSettings() back; the GMA switches land in its GMASettings
     (modifier_drift's and reject_sigma's negative sentinel = off, model_secant, the later experiments' laps factor,
-    the safe step from both ends, which bounds the bound hold holds)."""
+    the safe step from both ends and its model slope, which bounds the bound hold holds)."""
     from kite_rto.nodes.optimizer_params import PARAMS, settings_from_params
     from kite_rto.rto.settings import KiteRTOSettings
     v = {s.name: s.default for s in PARAMS}
@@ -162,6 +162,9 @@ def test_optimizer_defaults_build_the_kite_defaults_and_gma_switches_reach_gma()
     assert s.gma.modifier_drift is None and s.gma.model_secant is (not v["model_secant"])
     assert s.gma.averaging_schedule == (1.0, 1.5) and s.gma.reject_sigma is None
     assert s.gma.safe_both_ends is (not v["safe_both_ends"])
+    assert v["safe_model_slope"] == "terms"
+    for name, value in (("true", True), ("false", False), ("extrapolated", "extrapolated")):
+        assert settings_from_params({**v, "safe_model_slope": name}).gma.safe_model_slope == value
     assert settings_from_params({**v, "reject_sigma": 0.5}).gma.reject_sigma == 0.5
     flipped = not v["bound_sigma_start"]
     assert settings_from_params({**v, "bound_sigma_start": flipped}).gma.bound_sigma_start is flipped

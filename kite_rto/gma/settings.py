@@ -211,7 +211,10 @@ class GMASettings:
             other side of ``c_k`` than the step, through a curved region, can flip the sign the model has right,
             and the step then runs into the constraint it was predicted to leave. ``"extrapolated"``: only when
             the estimate extrapolates, i.e. some fitted point's weight in the step is negative
-            (:func:`~kite_rto.gma.safety.step_weights`: a difference taken on the other side of ``c_k``). Off
+            (:func:`~kite_rto.gma.safety.step_weights`: a difference taken on the other side of ``c_k``).
+            ``"terms"``: only for the part of the step that extrapolates: the step is split into the fitted
+            points' terms ``a_i p_i``, and only a term with ``a_i < 0`` takes the worse of the two slopes; the
+            other terms keep the estimate, where a measured difference is better evidence than the model. Off
             (False) by default.
         safe_shrink: shrink the trust radius (by ``trust_shrink``) whenever a safe step shortens the filtered
             step (True, default); False leaves the radius to ``trust_adapt``: the safe step already limits that

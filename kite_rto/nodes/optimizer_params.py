@@ -15,6 +15,8 @@ from .parameters import ParamSpec
 
 __all__ = ["PARAMS", "RUN_INDEPENDENT", "cross_check", "run_settings", "settings_from_params"]
 
+_SLOPE_NAMES = {True: "true", False: "false", "extrapolated": "extrapolated", "terms": "terms"}
+"""``GMASettings.safe_model_slope`` -> the string of the ``safe_model_slope`` parameter."""
 _S = KiteRTOSettings()
 _E = _S.experiment
 PARAMS = (
@@ -87,6 +89,11 @@ PARAMS = (
     ParamSpec("safe_both_ends", _S.gma.safe_both_ends, "GMA's safe step learns the altitude constraint's curvature "
               "from both ends of each past step: the gradient at its end predicting its start too (false: from its "
               "start only)"),
+    ParamSpec("safe_model_slope", _SLOPE_NAMES[_S.gma.safe_model_slope], "GMA's safe step predicts the altitude "
+              "constraint's change with the worse of the measured and the model's slope: true (always), false "
+              "(never: the measured slope), extrapolated (when the step extrapolates a difference flown on the other "
+              "side of the setpoints), terms (for the extrapolated part of the step alone)",
+              choices=tuple(_SLOPE_NAMES.values())),
     ParamSpec("box_theta_0_deg", [round(math.degrees(v), 9) for v in _S.box.theta_0], "optimizer's theta_0 range [low, high]",
               1.0, 89.0, unit="deg"),
     ParamSpec("box_A_phi_deg", [round(math.degrees(v), 9) for v in _S.box.A_phi], "optimizer's A_phi range [low, high]",
@@ -153,6 +160,7 @@ def settings_from_params(v: dict) -> KiteRTOSettings:
                                   bound_sigma=None if v["bound_sigma"] < 0 else v["bound_sigma"],
                                   bound_sigma_start=v["bound_sigma_start"],
                                   safe_both_ends=v["safe_both_ends"],
+                                  safe_model_slope={n: k for k, n in _SLOPE_NAMES.items()}[v["safe_model_slope"]],
                                   # the altitude's own noise filter is part of the noise-matched one
                                   constraint_drift=None if drift is None else _S.gma.constraint_drift)
     except ValueError as err:

@@ -65,7 +65,8 @@ def default_gma_settings() -> GMASettings:
     squared box width; the fixed filter 0.5 where an estimate has no standard deviation), the altitude's gradient
     modifier filtered by its own noise (drift bound 20 m per squared box width), 3 m altitude back-off, safe steps
     (curvature bound 20 m per squared box width learned from both ends of steps of at least 0.1 box widths, 2
-    standard deviations, 1 m tolerance; a cut step does not shrink the trust region), the constraints' gradient
+    standard deviations, 1 m tolerance; a cut step does not shrink the trust region; the model's slope where it is
+    worse for the part of the step that extrapolates, ``safe_model_slope`` ``"terms"``), the constraints' gradient
     modifiers from the model's secant (``model_secant``, ``model_secant_cost`` False), experiments twice as long
     from iteration 1 on (``averaging_schedule`` (1, 2)), a step undone when the measured cost rose by more than 1
     standard error (``reject_sigma`` 1), setpoints at a bound of the box held there from iteration 2 on unless the
@@ -74,8 +75,9 @@ def default_gma_settings() -> GMASettings:
     return GMASettings(filter_gain=1.0, modifier_filter=0.5, modifier_drift=15.0, constraint_drift=20.0,
                        trust_radius=0.7, trust_radius_min=0.05, backoff=3.0, safe_curvature=20.0, safe_sigma=2.0,
                        safe_tolerance=1.0, safe_shrink=False, safe_adapt_min_step=0.1, safe_both_ends=True,
-                       model_secant=True, model_secant_cost=False, averaging_schedule=(1.0, 2.0), reject_sigma=1.0,
-                       bound_sigma=2.0, bound_sigma_start=False, tol_c=1e-3)
+                       safe_model_slope="terms", model_secant=True, model_secant_cost=False,
+                       averaging_schedule=(1.0, 2.0), reject_sigma=1.0, bound_sigma=2.0, bound_sigma_start=False,
+                       tol_c=1e-3)
 
 
 @dataclass(frozen=True)
