@@ -123,6 +123,17 @@ def test_the_summary_evaluates_the_done_when_criteria_per_subset():
         "| nelder-mead >4 (met) | nelder-mead >4 (met) | nelder-mead 2.0 (NOT met) |")
 
 
+def test_the_summary_names_the_environment_and_flags_oracles_from_different_caches():
+    rows = [_row("a", 0, "gma", 99.5, 300.0), replace(_row("a", 1, "gma", 99.2, 500.0), oracle_kn=601.25),
+            _row("b", 0, "gma", 99.6, 900.0, tuning=False)]
+    text = summarize(rows, budget=4.0, code="0123456789ab", libraries={"numpy": "2.4.6", "hipersim": "absent"})
+    env = text.split("## Environment", 1)[1]
+    assert "- code version 0123456789ab" in env and "- numpy 2.4.6, hipersim absent" in env
+    assert "| a | 600.000, 601.250 (rows from different oracle caches) |" in env
+    assert "| b | 600.000 |" in env
+    assert "code version" not in summarize(rows, budget=4.0)
+
+
 def test_the_summary_counts_per_seed_over_the_scenarios():
     late = replace(_row("a", 1, "gma", 99.2, 1500.0, held=3), reach_index=3)     # at 99 % from iterate 3 on
     rows = [_row("a", 0, "gma", 99.5, 300.0), _row("b", 0, "gma", 98.0, 700.0, held=None), late,

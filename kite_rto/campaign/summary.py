@@ -1,7 +1,9 @@
 """The campaign's summary in markdown (:func:`summarize`): per scenario and GMA variant, per seed (a seed is the same
 turbulence box in every scenario with the same Mann length scale and anisotropy, so outcomes correlate by seed),
 then issue 14's done-when criteria over all runs and over the tuning and report subsets, then the baselines' time to
-99 % over GMA's.
+99 % over GMA's, and last the environment: the code version, the numerical libraries and each scenario's oracle
+(its cache is rebuilt per environment, and a criterion decided by a run near 99 % can move with it; a scenario
+whose rows carry more than one oracle value was merged from different caches).
 
 Times to 99 % of runs that never reach it count as infinite in medians ("never" when the median is). A baseline's
 per-seed ratio is its time to 99 % over the reference GMA run's on the same seed (seeds where GMA did not reach
@@ -138,9 +140,24 @@ def _baseline_table(rows, budget: float) -> list:
     return lines
 
 
-def summarize(rows, budget: float) -> str:
+def _environment(rows, code: str | None, libraries: dict | None) -> list:
+    lines = []
+    if code is not None:
+        lines.append(f"- code version {code}")
+    if libraries:
+        lines.append("- " + ", ".join(f"{k} {v}" for k, v in libraries.items()))
+    lines += ["", "| scenario | oracle kN |", "|---|---|"]
+    for sc in dict.fromkeys(r.scenario for r in rows):
+        values = sorted({r.oracle_kn for r in rows if r.scenario == sc})
+        note = "" if len(values) == 1 else " (rows from different oracle caches)"
+        lines.append(f"| {sc} | {', '.join(f'{v:.3f}' for v in values)}{note} |")
+    return lines
+
+
+def summarize(rows, budget: float, code: str | None = None, libraries: dict | None = None) -> str:
     """The markdown summary of ``rows`` (:class:`~kite_rto.campaign.results.RunResult`, campaign order);
-    ``budget``: the baselines' budget factor."""
+    ``budget``: the baselines' budget factor; ``code``, ``libraries``: the code version and library versions
+    (name -> version) named in its *Environment* section (left out when None)."""
     variants = list(dict.fromkeys(r.method for r in rows if r.method not in BASELINES))
     seeds = sorted({r.seed for r in rows})
     out = [f"# Scenario campaign: {len(dict.fromkeys(r.scenario for r in rows))} scenarios x {len(seeds)} seeds, "
@@ -173,4 +190,5 @@ def summarize(rows, budget: float) -> str:
             rel = "-" if not (math.isfinite(m) and math.isfinite(g) and g > 0) else f"{100 * (m / g - 1):+.0f} %"
             out.append(f"- {v}: median t99 {_fmt_t(m)} s vs {_fmt_t(g)} s: {rel}")
         out.append("")
+    out += ["## Environment", ""] + _environment(rows, code, libraries) + [""]
     return "\n".join(out)

@@ -13,7 +13,7 @@ from functools import lru_cache
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-__all__ = ["code_version", "check_code_version"]
+__all__ = ["code_version", "check_code_version", "library_versions"]
 
 _PACKAGES = ("kite", "flight", "gma", "rto")
 _MODULES = ("cache.py", "campaign/methods.py", "campaign/tasks.py", "campaign/judge.py", "campaign/results.py")
@@ -34,6 +34,17 @@ def code_version() -> str:
         except PackageNotFoundError:
             h.update(f"{lib}=absent\0".encode())
     return h.hexdigest()[:12]
+
+
+def library_versions() -> dict:
+    """Name -> installed version (``"absent"``) of the numerical libraries :func:`code_version` hashes."""
+    out = {}
+    for lib in _LIBRARIES:
+        try:
+            out[lib] = version(lib)
+        except PackageNotFoundError:
+            out[lib] = "absent"
+    return out
 
 
 def check_code_version(expected: str) -> None:

@@ -24,6 +24,7 @@ from ..campaign.results import write_table, write_wall_times
 from ..campaign.scenarios import select_scenarios
 from ..campaign.summary import summarize
 from ..campaign.variants import load_variants, parse_variant
+from ..campaign.version import library_versions
 from ..rto.settings import KiteRTOSettings
 from .campaign_plot import plot_campaign
 
@@ -122,7 +123,8 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     write_table(out / "results.csv", result.results)
     write_wall_times(out / "wall.csv", result.results)
-    text = summarize(result.results, campaign.budget) if result.results else "# Scenario campaign: no results\n"
+    text = (summarize(result.results, campaign.budget, campaign.code, library_versions()) if result.results
+            else "# Scenario campaign: no results\n")
     (out / "summary.md").write_text(text + "\n")
     if result.results:
         plot_campaign(out / "campaign.png", result.results)
