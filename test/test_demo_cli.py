@@ -6,6 +6,7 @@ and no traceback, leave a partial report and a readable recording.
 """
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -118,7 +119,9 @@ def test_ctrl_c_stops_the_demo_and_every_node(ros_env, tmp_path):
     out = Output(demo)
     try:
         assert out.wait_for(lambda ln: "s sim" in ln and "ETA" in ln, 90.0), f"no progress line: {out.lines}"
-        assert out.wait_for(lambda ln: "lap 0:" in ln, 60.0), f"no lap in the progress line: {out.lines}"
+        # the first lap the line shows depends on when it is printed: any lap (re: "lap N:")
+        assert out.wait_for(lambda ln: re.search(r"lap \d+:", ln) is not None, 60.0), \
+            f"no lap in the progress line: {out.lines}"
         kids = children(demo.pid)
         assert len(kids) == 4, kids                            # recorder, kite_viz, controller, plant
         os.killpg(demo.pid, signal.SIGINT)                     # what a terminal does on Ctrl-C
