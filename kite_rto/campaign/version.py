@@ -28,11 +28,8 @@ def code_version() -> str:
     files = [root / m for m in _MODULES] + sorted(p for pkg in _PACKAGES for p in (root / pkg).rglob("*.py"))
     for p in files:
         h.update(p.relative_to(root).as_posix().encode() + b"\0" + p.read_bytes() + b"\0")
-    for lib in _LIBRARIES:
-        try:
-            h.update(f"{lib}={version(lib)}\0".encode())
-        except PackageNotFoundError:
-            h.update(f"{lib}=absent\0".encode())
+    for lib, v in library_versions().items():
+        h.update(f"{lib}={v}\0".encode())
     return h.hexdigest()[:12]
 
 
