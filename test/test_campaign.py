@@ -9,6 +9,7 @@ import pytest
 
 from kite_rto.campaign.plan import Campaign
 from kite_rto.campaign.results import TABLE_COLUMNS, RunResult, write_table
+from kite_rto.campaign.tables import read_table
 from kite_rto.campaign.scenarios import scenario
 from kite_rto.campaign.summary import summarize
 from kite_rto.campaign.tasks import baseline_budget
@@ -16,6 +17,7 @@ from kite_rto.campaign.variants import parse_variant
 from kite_rto.campaign.version import check_code_version, code_version
 from kite_rto.rto.settings import KiteRTOSettings
 from kite_rto.tools import campaign as cli
+from kite_rto.tools import campaign_summary
 
 TWO = (scenario("default"), scenario("high_floor"))
 
@@ -119,6 +121,7 @@ def test_the_summary_evaluates_the_done_when_criteria_per_subset():
     # Nelder-Mead over GMA per seed: a 5.0 and inf (not reached): median inf; b 2.0 and 2.0: median 2.0;
     # over scenarios: median(inf, 2.0) = inf, i.e. above the budget factor
     assert "| median ratio over scenarios | | >4 |" in text
+    assert "| nelder-mead | 4 | 0 | 2 | 1 | 1 |" in text        # per-seed ratios 5.0, inf, 2.0, 2.0
     assert lines["best model-free baseline needs >= 3x GMA's time to 99 % (median over scenarios)"].endswith(
         "| nelder-mead >4 (met) | nelder-mead >4 (met) | nelder-mead 2.0 (NOT met) |")
 
@@ -154,6 +157,39 @@ def test_the_table_holds_every_field_but_wall_time_in_campaign_order(tmp_path):
     assert [r["method"] for r in table] == ["gma", "model-only"]
     assert json.loads(table[0]["percent"]) == [90.0, 99.5] and table[0]["budget_s"] == ""
     assert json.loads(table[1]["altitude"]) == [None] and table[1]["lowest_altitude"] == ""
+
+
+def test_a_table_reads_back_as_the_rows_it_was_written_from(tmp_path):
+    crash = replace(_row("a", 0, "model-only", 90.0, None, held=None, budget=1200.0), altitude=(None,),
+                    lowest_altitude=None, percent=(0.0,), times_s=(0.0,), message="stopped: no lap")
+    rows = [_row("a", 0, "gma", 99.5, 300.0), crash, _row("b", 3, "gma", 98.25, None, held=None, tuning=False)]
+    write_table(tmp_path / "t.csv", rows)
+    back = read_table(tmp_path / "t.csv")
+    assert all(math.isnan(r.wall_s) for r in back)
+    assert [replace(r, wall_s=w.wall_s) for r, w in zip(back, rows)] == rows
+    assert summarize(back, budget=4.0) == summarize(rows, budget=4.0)
+    text = (tmp_path / "t.csv").read_text().replace(",98.25,", ",98.x,")
+    (tmp_path / "bad.csv").write_text(text)
+    with pytest.raises(ValueError, match=r"bad.csv, line 4, column final_percent = '98.x'"):
+        read_table(tmp_path / "bad.csv")
+    (tmp_path / "cols.csv").write_text("scenario,seed\na,0\n")
+    with pytest.raises(ValueError, match="columns"):
+        read_table(tmp_path / "cols.csv")
+
+
+def test_campaign_summary_merges_tables_and_refuses_a_run_in_two(tmp_path, capsys):
+    write_table(tmp_path / "a.csv", [_row("a", 0, "gma", 99.5, 300.0), _row("a", 0, "bayes-opt", 99.1, 600.0)])
+    write_table(tmp_path / "b.csv", [_row("a", 1, "gma", 99.2, 500.0), _row("a", 1, "bayes-opt", 98.0, None)])
+    assert campaign_summary.main([str(tmp_path / "a.csv"), str(tmp_path / "b.csv"), "--out",
+                                  str(tmp_path / "s.md")]) == 0
+    text = (tmp_path / "s.md").read_text()
+    assert "| a | yes | 100 | 2 | 99.20 | 99.35 | 0 | 110.0 | 2/2 | 400 |" in text
+    assert "| bayes-opt | 2 | 0 | 1 | 0 | 1 |" in text             # per-seed ratios 600 / 300 = 2 and not reached
+    capsys.readouterr()
+    assert campaign_summary.main([str(tmp_path / "a.csv"), str(tmp_path / "a.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "scenario 'a', seed 0, method 'gma' is in both" in err and "a.csv" in err
+    assert campaign_summary.main([str(tmp_path / "missing.csv")]) == 2
 
 
 @pytest.mark.slow

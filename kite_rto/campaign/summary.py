@@ -137,6 +137,13 @@ def _baseline_table(rows, budget: float) -> list:
         lines.append(f"| {sc} | {_fmt_t(tg)} | " + " | ".join(cells) + " |")
     overall = [_fmt_ratio(_median([_median(v) for v in ratios[m].values()]), budget) for m in methods]
     lines.append("| median ratio over scenarios | | " + " | ".join(overall) + " |")
+    lines += ["", "Per-seed ratios over all scenarios (runs where GMA reached 99 %):", "",
+              "| method | runs | < 1 (reached first) | 1 to < 3 | >= 3 | not within the budget |",
+              "|---|---|---|---|---|---|"]
+    for m in methods:
+        v = np.array([x for xs in ratios[m].values() for x in xs], dtype=float)
+        lines.append(f"| {m} | {len(v)} | {int(np.sum(v < 1))} | {int(np.sum((v >= 1) & (v < 3)))} | "
+                     f"{int(np.sum((v >= 3) & np.isfinite(v)))} | {int(np.sum(~np.isfinite(v)))} |")
     return lines
 
 
