@@ -218,7 +218,9 @@ def test_plant_killed_and_restarted_restarts_the_experiment(probe, ros_env, requ
         assert ctrl_sync == 1 and opt_restart == 1
         assert counts == {"experiments": PER, "iterations": 1} and lost == 0 and repeated == 0 and dc < 1e-9
         assert extra[0]["t_end"] <= t_kill                           # kept from the old plant
-        assert extra[1]["t_start"] < 1.0 < extra[1]["t_end"]       # started again at the new plant's t = 0
+        # started again on the new plant's clock, which began at t = 0: before the killed experiment had begun on
+        # the old one (how far into the new clock depends on how soon the optimizer saw the jump, i.e. machine speed)
+        assert extra[1]["t_start"] < t_first and extra[1]["t_end"] > extra[1]["t_start"]
         assert row.unsafe_setpoints == 0
 
 
