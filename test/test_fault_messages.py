@@ -159,11 +159,11 @@ def test_bad_steering_realtime_is_not_a_command(probe, ros_env, request, tmp_pat
         # bad phase (command_timeout 0.5 s), and had one been taken after it went neutral, "steering commands are
         # back" would be logged before the good phase began.
         went_neutral = [t for t in wall_stamps("flying neutral") if t_epoch0 <= t < t_epoch1]
-        back_early = [t for t in wall_stamps("steering commands are back") if went_neutral and went_neutral[0] < t
-                      < t_epoch1]
+        came_back = wall_stamps("steering commands are back")
+        back_early = [t for t in came_back if went_neutral and went_neutral[0] < t < t_epoch1]
         neutral = bool(went_neutral)
         neutral_after = went_neutral[0] - t_epoch0 if neutral else math.nan
-        back = sum(t >= t_epoch1 for t in wall_stamps("steering commands are back"))
+        back = sum(t >= t_epoch1 for t in came_back)
         finite = all(all(map(math.isfinite, s.position)) for s in states)
         warnings = plant.matching("rejected steering")
         taken = not neutral or bool(back_early)

@@ -17,11 +17,11 @@ __all__ = ["read_table"]
 
 _INTS = ("seed", "reach_index", "held_from", "below_floor", "experiments", "crashes")
 _FLOATS = ("h_min", "t99_s", "final_percent", "lowest_altitude", "flight_time_s", "budget_s", "oracle_kn")
-_LISTS = ("times_s", "percent", "altitude")
 
 
 def _parse(name: str, text: str):
-    """One cell of the table as the :class:`~kite_rto.campaign.results.RunResult` field ``name`` holds it."""
+    """One cell of the table as the :class:`~kite_rto.campaign.results.RunResult` field ``name`` holds it (the
+    other fields, ``times_s``, ``percent`` and ``altitude``, are JSON lists)."""
     if name in ("scenario", "method", "message"):
         return text
     if name == "tuning":
@@ -42,8 +42,8 @@ def _parse(name: str, text: str):
 
 def read_table(path) -> list:
     """The :class:`~kite_rto.campaign.results.RunResult` rows of a table ``write_table`` wrote, in its order;
-    ``wall_s`` (not in the table) is NaN. Raises ValueError naming the file, line and column of a cell that does not parse, or the columns when
-    they are not :data:`TABLE_COLUMNS`."""
+    ``wall_s`` (not in the table) is NaN. Raises ValueError naming the file, line and column of a cell that does
+    not parse, or the columns when they are not :data:`~kite_rto.campaign.results.TABLE_COLUMNS`."""
     with open(path, newline="") as f:
         reader = csv.DictReader(f)
         if tuple(reader.fieldnames or ()) != TABLE_COLUMNS:
