@@ -8,6 +8,7 @@ import pytest
 from kite_rto.flight.closed_loop import make_closed_loop, run_closed_loop
 from kite_rto.rto.experiment import ExperimentEvaluator, ExperimentSpec
 from kite_rto.flight.shape import setpoints_from_shape
+from kite_rto.gma import TrustRegion
 from kite_rto.rto.settings import KiteRTOSettings
 from kite_rto.rto.session import RTOSession
 from kite_rto.rto.builder import make_gma, model_only_optimum
@@ -74,7 +75,7 @@ def test_normalization_reduces_lap_scatter_under_turbulence():
 @pytest.fixture(scope="module")
 def quick_settings():
     return KiteRTOSettings(experiment=ExperimentSpec(settle_time=10.0, settle_laps=1, n_laps=2),
-                           fd_step=(0.1, 0.1, 0.1)).with_gma(filter_gain=0.8, trust_radius=0.3)
+                           fd_step=(0.1, 0.1, 0.1)).with_gma(filter_gain=0.8, trust_region=TrustRegion(radius=0.3))
 
 
 def test_deterministic_rto_improves_on_model_only_optimum(quick_settings):
@@ -114,12 +115,12 @@ def test_session_repeats_a_crashed_experiment(quick_settings):
     assert again is not None and np.allclose(again, c) and session.repeats == 1 and not session.experiments
 
 
-def test_session_flies_the_laps_of_the_averaging_schedule(quick_settings):
-    """GMA's averaging hint scales the spec's laps: 1 lap per experiment in iteration 0, 2 from iteration 1 on
-    (``averaging_schedule`` (1, 2)); a crashed experiment is flown again with its own laps."""
+def test_session_flies_the_laps_of_the_effort_schedule(quick_settings):
+    """GMA's effort scales the spec's laps: 1 lap per experiment in iteration 0, 2 from iteration 1 on
+    (``effort_schedule`` (1, 2)); a crashed experiment is flown again with its own laps."""
     settings = replace(quick_settings, experiment=replace(quick_settings.experiment, settle_time=0.0,
                                                           settle_laps=0, n_laps=1))
-    gma = make_gma(settings.with_gma(averaging_schedule=(1, 2)))
+    gma = make_gma(settings.with_gma(effort_schedule=(1, 2)))
     session = RTOSession(gma, settings.experiment)
     session.start(0.0)
     t, crash, k1_start = 0.0, 0, None

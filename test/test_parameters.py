@@ -149,25 +149,44 @@ def test_plant_defaults_are_the_plant_config_defaults():
                                                "wait_subscribers", "resend_period", "one_plant_check"}
 
 
-def test_optimizer_defaults_build_the_kite_defaults_and_gma_switches_reach_gma():
-    """The optimizer's parameter defaults build KiteRTOSettings() back; the GMA switches land in its GMASettings
-    (modifier_drift's and reject_sigma's negative sentinel = off, model_secant, the later experiments' laps factor,
-    the safe step from both ends and its model slope, which bounds the bound hold holds)."""
+def test_optimizer_defaults_build_the_kite_defaults_and_gma_parameters_reach_gma():
+    """The optimizer's parameter defaults build KiteRTOSettings() back; ``mechanisms`` switches GMA's mechanisms on
+    and off (off = None), each dotted ``<mechanism>.<field>`` parameter lands in its sub-object, and the effort
+    schedule, back-off and filter gain in GMASettings."""
+    from kite_rto.gma import MECHANISMS
     from kite_rto.nodes.optimizer_params import PARAMS, settings_from_params
     from kite_rto.rto.settings import KiteRTOSettings
     v = {s.name: s.default for s in PARAMS}
     assert settings_from_params(v) == KiteRTOSettings()
-    s = settings_from_params({**v, "modifier_drift": -1.0, "model_secant": not v["model_secant"], "n_laps_factor": 1.5,
-                              "reject_sigma": -1.0, "safe_both_ends": not v["safe_both_ends"]})
-    assert s.gma.modifier_drift is None and s.gma.model_secant is (not v["model_secant"])
-    assert s.gma.averaging_schedule == (1.0, 1.5) and s.gma.reject_sigma is None
-    assert s.gma.safe_both_ends is (not v["safe_both_ends"])
-    assert v["safe_model_slope"] == "terms"
-    for name, value in (("true", True), ("false", False), ("extrapolated", "extrapolated")):
-        assert settings_from_params({**v, "safe_model_slope": name}).gma.safe_model_slope == value
-    assert settings_from_params({**v, "reject_sigma": 0.5}).gma.reject_sigma == 0.5
-    flipped = not v["bound_sigma_start"]
-    assert settings_from_params({**v, "bound_sigma_start": flipped}).gma.bound_sigma_start is flipped
+    assert sorted(v["mechanisms"]) == sorted(MECHANISMS)
+    dotted = [s.name for s in PARAMS if "." in s.name]
+    assert dotted and all(s.split(".")[0] in MECHANISMS for s in dotted)
+    for name in dotted:
+        mech, field = name.split(".")
+        spec = next(s for s in PARAMS if s.name == name)
+        value = spec.high if spec.default != spec.high else spec.low
+        if mech == "trust_region" and field == "min_radius":
+            value = 0.5
+        got = getattr(getattr(settings_from_params({**v, name: value}).gma, mech), field)
+        assert got == value, name
+    off = settings_from_params({**v, "mechanisms": ["trust_region", "safe_step"]}).gma
+    assert off.undo is None and off.bound_hold is None and off.model_secant is None and off.noise_filter is None
+    assert off.modifier_filter is None and off.trust_region == KiteRTOSettings().gma.trust_region
+    s = settings_from_params({**v, "effort_schedule": [1.0, 1.5, 3.0], "backoff": 6.0, "filter_gain": 0.7}).gma
+    assert s.effort_schedule == (1.0, 1.5, 3.0) and s.backoff == 6.0 and s.filter_gain == 0.7
+
+
+def test_optimizer_refuses_bad_gma_parameters_naming_them():
+    from kite_rto.nodes.optimizer_params import PARAMS, settings_from_params
+    specs = {s.name: s for s in PARAMS}
+    with pytest.raises(ParameterError, match=r"parameter mechanisms = \['undo', 'bogus'\]: expected a list of "
+                                             "distinct names, each one of 'modifier_filter'"):
+        specs["mechanisms"].check(["undo", "bogus"])
+    with pytest.raises(ParameterError, match=r"parameter effort_schedule = \[\]: expected a list of 1 or more"):
+        specs["effort_schedule"].check([])
+    v = {s.name: s.default for s in PARAMS}
+    with pytest.raises(ParameterError, match="TrustRegion.min_radius=0.9: expected <= radius=0.7"):
+        settings_from_params({**v, "trust_region.min_radius": 0.9})
 
 
 def test_path_controller_retune():

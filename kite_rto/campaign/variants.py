@@ -2,8 +2,9 @@
 
 A variant is a name and a :class:`~kite_rto.rto.settings.KiteRTOSettings`. On the command line it is written
 ``NAME=FIELD=VALUE[,FIELD=VALUE...]``: dotted fields of the settings dataclasses changed from their defaults, values
-as Python literals (a bare word is a string), e.g. ``sc=gma.structure_check_every=3`` or
-``laps6=experiment.n_laps=6,gma.backoff=4.0``. ``load_variants("package.module:NAME")`` imports a mapping of names
+as Python literals (a bare word is a string), e.g. ``undo2=gma.undo.sigma=2.0``, ``noundo=gma.undo=None`` or
+``laps6=experiment.n_laps=6,gma.backoff=4.0``. A field of a GMA mechanism that is off switches it on with its
+defaults first (``gma.undo.sigma=1.5`` when ``gma.undo`` is ``None``). ``load_variants("package.module:NAME")`` imports a mapping of names
 to settings (or a callable returning one).
 """
 from __future__ import annotations
@@ -12,6 +13,7 @@ import ast
 import dataclasses
 import importlib
 
+from ..gma import MECHANISMS, GMASettings
 from ..rto.settings import KiteRTOSettings
 
 __all__ = ["parse_variant", "settings_with", "load_variants"]
@@ -34,6 +36,8 @@ def settings_with(settings, changes: dict):
             out = dataclasses.replace(out, **{head: value})
     for head, sub in nested.items():
         inner = getattr(out, head)
+        if inner is None and isinstance(out, GMASettings) and head in MECHANISMS:
+            inner = MECHANISMS[head]()          # a mechanism that is off: on, with its defaults, then changed
         if not dataclasses.is_dataclass(inner):
             raise ValueError(f"variant field {head}.{next(iter(sub))}: {head} = {inner!r} is not a dataclass")
         out = dataclasses.replace(out, **{head: settings_with(inner, sub)})

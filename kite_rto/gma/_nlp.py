@@ -2,8 +2,7 @@
 
 * :class:`RealizationNLP` -- the model's best realization of setpoints ``c``:
   ``min phi(u) s.t. y(u) = c, h(u) = 0, g_in(u) <= 0, lbu <= u <= ubu``.
-* :class:`ModifiedNLP` -- the modified problem of GMA (SPEC §5) with trust region, convexification,
-  back-off and optional soft constraints.
+* :class:`ModifiedNLP` -- the modified problem of GMA with trust region and back-off.
 
 Each wraps two IPOPT instances: a warm-started one (previous primal and dual solution, small barrier parameter)
 and a cold one used as a fallback when the warm solve fails. Creating the four instances takes about 3 s (CasADi
@@ -20,7 +19,6 @@ import numpy as np
 
 from .modifiers import Modifiers
 from .problem import ModelProblem
-from .settings import GMASettings
 
 __all__ = ["NLPResult", "RealizationNLP", "ModifiedNLP", "NLPPair"]
 
@@ -47,8 +45,8 @@ class NLPResult:
 class _TwoSolvers:
     """A warm and a cold ``nlpsol('ipopt')`` on the same NLP, and the last good solution."""
 
-    def __init__(self, name: str, nlp: dict, settings: GMASettings, tol: float):
-        base = {"print_level": 0, "sb": "yes", "max_iter": settings.max_ipopt_iter, "tol": tol}
+    def __init__(self, name: str, nlp: dict, settings, tol: float):
+        base = {"print_level": 0, "sb": "yes", "max_iter": settings.max_iter, "tol": tol}
         base.update(settings.ipopt_options)
         opts = {"print_time": False, "error_on_fail": False}
         self._cold = ca.nlpsol(f"{name}_cold", "ipopt", nlp, {**opts, "ipopt": base})
@@ -97,7 +95,8 @@ class _WarmStarted:
 class RealizationNLP(_WarmStarted):
     """``min_u phi(u) s.t. y(u) = c`` (+ equalities, inner constraints, bounds), parameter ``c`` (n_c,)."""
 
-    def __init__(self, problem: ModelProblem, settings: GMASettings):
+    def __init__(self, problem: ModelProblem, settings):
+        """``settings``: the :class:`~kite_rto.gma.ModelSettings` (IPOPT's iteration limit and options)."""
         self.problem = problem
         pr = problem
         c = type(pr.u).sym("c", pr.n_c)
@@ -131,7 +130,7 @@ class ModifiedNLP(_WarmStarted):
     (``sqrt(|sigma * d|^2 + delta^2) - delta``); ``sigma = 0`` leaves the cost unchanged.
     """
 
-    def __init__(self, problem: ModelProblem, settings: GMASettings):
+    def __init__(self, problem: ModelProblem, settings):
         self.problem = pr = problem
         sym = type(pr.u).sym
         n_c, n_g = pr.n_c, pr.n_g
@@ -151,7 +150,7 @@ class ModifiedNLP(_WarmStarted):
         self._nlp = _TwoSolvers(f"{pr.name}_modified", {"x": ca.vertcat(pr.u, s), "p": p, "f": f, "g": g},
                                 settings, 1e-9)
 
-    def solve(self, modifiers: Modifiers, *, radius, convexification, penalty: float | None, x0,
+    def solve(self, modifiers: Modifiers, *, radius, x0, convexification=None, penalty: float | None = None,
               spread=None) -> NLPResult:
         """Solve the modified problem around ``c_k = modifiers.c``.
 
@@ -168,6 +167,7 @@ class ModifiedNLP(_WarmStarted):
         n_g = pr.n_g
         c_k = np.asarray(m.c, float)
         sigma = np.zeros(pr.n_c) if spread is None else np.asarray(spread, float).reshape(pr.n_c)
+        convexification = np.zeros(pr.n_c) if convexification is None else convexification
         delta = max(1e-4 * float(np.linalg.norm(sigma * pr.c_width)), 1e-12)   # smoothing: 1e-4 box widths
         p = np.r_[c_k, m.eps, m.lam, np.asarray(m.mu, float).reshape(n_g, pr.n_c).ravel(order="F"),
                   convexification, m.backoff, 0.0 if penalty is None else penalty, sigma, delta]
@@ -188,7 +188,7 @@ class NLPPair:
     while another thread that needs the NLPs waits for that build instead of starting a second one.
     """
 
-    def __init__(self, problem: ModelProblem, settings: GMASettings):
+    def __init__(self, problem: ModelProblem, settings):
         self._args = (problem, settings)
         self._lock = threading.Lock()
         self._pair: tuple[RealizationNLP, ModifiedNLP] | None = None

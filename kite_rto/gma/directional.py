@@ -29,9 +29,9 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ._nlp import RealizationNLP
-from .gradients import GradientEstimate, GradientEstimator, PlantPoint, _alternate_flag, _positive, _preferred_sign
+from .gradients import GradientEstimate, GradientEstimator, PlantPoint, _positive
 from .problem import ModelProblem
-from .settings import GMASettings
+from .settings import ModelSettings
 
 __all__ = ["DirectionalGradient", "PrivilegedDirections", "privileged_directions", "lagrangian_gradient"]
 
@@ -53,37 +53,12 @@ class DirectionalGradient(GradientEstimator):
             for reuse: ``min(s_min, 1) / max(s_max, 1)`` of their singular values, 1 for full steps along every
             direction, smaller for short, long or ill-conditioned ones (also ``GradientEstimate.quality``).
 
-        alternate: step backwards in GMA's odd iterations (:meth:`plan_iteration`), so that a modifier filter
-            averages forward and backward quotients and their truncation errors cancel.
-        reflect: with ``alternate``, a backward iteration flies the forward iteration's perturbations reflected
-            through ``c_k`` and clipped to the box in every setpoint where that keeps at least half of the
-            displacement, and unreflected in the others (a setpoint held at or near its bound). Without it a
-            direction whose backward step leaves the box is flown forward whole, so a direction that mixes a
-            setpoint at its bound with free ones never changes side in the free ones either. Falls back to that
-            rule when the reflected points are worse conditioned than ``rcond_min``.
-        lead: perturb each direction on the side the last step went (``toward`` of :meth:`plan_iteration`,
-            which :class:`~kite_rto.gma.GMA` passes as ``c_k - c_(k-1)``): the sign of the direction's component
-            along that step in box-width-scaled setpoints, clipped to the box, as long as the clipped point keeps
-            at least half of the direction's step; otherwise the rule below. The next step mostly goes on the
-            same way, and a one-sided quotient is a secant: taken on that side it spans the region the step
-            enters, taken on the other side it is extrapolated across ``c_k`` with the plant's curvature
-            (issue #14 item 3). Not with ``alternate``.
-        keep_side: in (0, 1]: the preferred side (forward, or backward in an odd iteration with ``alternate``) is
-            flown, clipped to the box, as long as the clipped point keeps at least this fraction of the
-            direction's step; below it, the side that keeps more. Default 1: the preferred side only when its
-            step fits whole, so an iterate less than one step from its upper bound measures behind it; 0.5 keeps
-            a secant on the side the box leaves room for, shorter and noisier but over the region a step towards
-            that bound enters.
-
-    A perturbation that would leave the setpoint box is taken backwards (``keep_side``), and clipped to the box
-    when that leaves it too (whichever keeps more of the direction). The fit always uses the setpoints actually flown.
+    A perturbation that would leave the setpoint box is taken backwards, and clipped to the box when that leaves it
+    too (whichever keeps more of the direction). The fit always uses the setpoints actually flown.
     """
 
-    uses_model = True
-
     def __init__(self, directions, step: float = 0.5, reuse: bool = True, radius=None,
-                 window: int | None = None, rcond_min: float = 0.2, alternate: bool = False,
-                 reflect: bool = False, lead: bool = False, keep_side: float = 1.0):
+                 window: int | None = None, rcond_min: float = 0.2):
         U = np.asarray(directions, dtype=float)
         if U.ndim == 1:
             U = U[:, None]
@@ -114,33 +89,10 @@ class DirectionalGradient(GradientEstimator):
         if not 0.0 < rcond_min <= 1.0:
             raise ValueError(f"DirectionalGradient.rcond_min={rcond_min!r}: expected a value in (0, 1]")
         self.rcond_min = float(rcond_min)
-        self.alternate = _alternate_flag("DirectionalGradient", alternate)
-        if not isinstance(reflect, bool):
-            raise ValueError(f"DirectionalGradient.reflect={reflect!r}: expected True or False")
-        self.reflect = reflect
-        if not isinstance(lead, bool):
-            raise ValueError(f"DirectionalGradient.lead={lead!r}: expected True or False")
-        if lead and self.alternate:
-            raise ValueError("DirectionalGradient.lead=True with alternate=True: expected at most one rule for the "
-                             "perturbations' side")
-        self.lead = lead
-        if isinstance(keep_side, bool) or not isinstance(keep_side, (int, float)) or not 0.0 < keep_side <= 1.0:
-            raise ValueError(f"DirectionalGradient.keep_side={keep_side!r}: expected a number in (0, 1]")
-        self.keep_side = float(keep_side)
 
     @property
     def n_directions(self) -> int:
         return self.U.shape[1]
-
-    def with_directions(self, extra) -> "DirectionalGradient":
-        """A copy with the columns of ``extra`` (n_c, m) appended to ``U`` (same step, reuse, window, rcond_min;
-        the default radius is re-derived from the new columns): how :class:`~kite_rto.gma.GMA` restores a
-        direction its structure check found the model wrong along (``GMASettings.structure_check_every``)."""
-        extra = np.asarray(extra, dtype=float).reshape(self.U.shape[0], -1)
-        window = None if self.window == 2 * self.n_directions else self.window
-        return DirectionalGradient(np.column_stack([self.U, extra]), self.step, self.reuse, self._radius_arg,
-                                   window, self.rcond_min, self.alternate, self.reflect, self.lead,
-                                   self.keep_side)
 
     def coordinates(self, dc) -> np.ndarray:
         """Direction-basis coordinates ``z = U^+ dc`` of setpoint displacements ``dc`` (n_c,) or (m, n_c)."""
@@ -165,34 +117,16 @@ class DirectionalGradient(GradientEstimator):
         return chosen, self._rcond(z)
 
     def plan(self, c_k, lb, ub, past=()):
-        return self.plan_iteration(c_k, lb, ub, past, 0)
-
-    def plan_iteration(self, c_k, lb, ub, past, iteration, toward=None):
-        """:meth:`plan` for GMA's iteration ``iteration``; ``toward`` (n_c,), setpoint units: the last step
-        ``c_k - c_(k-1)``, used with ``lead`` (None or zero: no last step, the rule without ``lead``)."""
-        c_k, prefer = np.asarray(c_k, float), _preferred_sign(self.alternate, iteration)
+        """One point per direction: ``c_k + step * d_j`` clipped to the box, or backwards where the backward step
+        keeps more of the direction than the forward one (none when past points can be reused)."""
+        c_k = np.asarray(c_k, float)
         if self.reuse and self._select(c_k, past)[1] >= self.rcond_min:
             return []
-        if self.lead and toward is not None and np.any(np.asarray(toward, float) != 0.0):
-            return self._leading(c_k, np.asarray(lb, float), np.asarray(ub, float), np.asarray(toward, float))
-        if self.reflect and prefer < 0:
-            lb, ub = np.asarray(lb, float), np.asarray(ub, float)
-            back = [_reflected(c_k, x, lb, ub) for x in self._sided(c_k, lb, ub, 1.0)]
-            if self._rcond(self.coordinates(np.array(back) - c_k)) >= self.rcond_min:
-                return back
-        return self._sided(c_k, lb, ub, prefer)
-
-    def _sided(self, c_k, lb, ub, prefer: float) -> list:
-        """One point per direction: the ``prefer`` sign while its step, clipped to the box, keeps ``keep_side`` of
-        the direction; else the sign that keeps more (``prefer`` first)."""
         points = []
         for d in self.U.T:
-            cands = [np.clip(c_k + sign * self.step * d, lb, ub) for sign in (prefer, -prefer)]
+            cands = [np.clip(c_k + sign * self.step * d, lb, ub) for sign in (1.0, -1.0)]
             kept = [self._kept(c_k, c, d) for c in cands]
-            if self.keep_side < 1.0 and kept[0] >= self.keep_side:
-                points.append(cands[0])
-                continue
-            # the other sign only when it keeps more than rounding does (both full steps inside the box differ
+            # the backward step only when it keeps more than rounding does (both full steps inside the box differ
             # by ~1e-16, and argmax would pick a side at random)
             points.append(cands[1] if kept[1] > kept[0] * (1.0 + 1e-9) else cands[0])
         return points
@@ -202,18 +136,6 @@ class DirectionalGradient(GradientEstimator):
         ``c_k`` projected on the step, in direction coordinates (1 for the whole step, less when clipped)."""
         full = self.coordinates(self.step * d)
         return abs(float(self.coordinates(x - c_k) @ full)) / float(full @ full)
-
-    def _leading(self, c_k, lb, ub, toward) -> list:
-        """``lead``'s points: per direction the side of ``toward`` (scaled by the box width) when its clipped
-        step keeps at least half of the direction's step, else :meth:`_sided`'s choice for that direction."""
-        w = ub - lb
-        fallback = self._sided(c_k, lb, ub, 1.0)
-        points = []
-        for j, d in enumerate(self.U.T):
-            sign = float(np.sign((d / w) @ (toward / w)))
-            x = np.clip(c_k + sign * self.step * d, lb, ub)
-            points.append(x if sign != 0.0 and self._kept(c_k, x, d) >= 0.5 else fallback[j])
-        return points
 
     def estimate(self, c_k, nominal: PlantPoint, new: Sequence[PlantPoint], past=(), model=None):
         """The DMA gradient at ``c_k``; ``model`` supplies ``grad_phi`` (n_c,) and ``jac_g`` (n_g, n_c) there
@@ -248,13 +170,6 @@ class DirectionalGradient(GradientEstimator):
         return GradientEstimate(g_phi + corr[:, 0], j_g + corr[:, 1:].T, rcond, std,
                                 f"directional ({self.n_directions} of {n_c})",
                                 f"{len(pts)} {source}, b = {np.round(b[:, 0], 6).tolist()}", dc)
-
-
-def _reflected(c_k: np.ndarray, x: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> np.ndarray:
-    """``x`` reflected through ``c_k`` and clipped to ``[lb, ub]`` in every setpoint where that keeps at least half
-    of the displacement's length; unreflected in the others (a setpoint at or near its bound)."""
-    back = np.clip(2.0 * c_k - x, lb, ub)
-    return np.where(np.abs(back - c_k) >= 0.5 * np.abs(x - c_k), back, x)
 
 
 @dataclass
@@ -347,13 +262,13 @@ def privileged_directions(lagrangian_gradient: Callable[[np.ndarray], np.ndarray
                                 sensitivity=S, gradient=g0, fixed=fixed)
 
 
-def lagrangian_gradient(problem: ModelProblem, c, nu=None, settings: GMASettings | None = None) -> np.ndarray:
+def lagrangian_gradient(problem: ModelProblem, c, nu=None, settings: ModelSettings | None = None) -> np.ndarray:
     """``grad_c (phi_hat + nu^T g_hat)`` (n_c,) of the model's best realization of setpoints ``c``
     (``min phi s.t. y(u) = c``): the cost part from the multipliers of ``y(u) = c``, the constraint part by
-    central differences of warm re-solves (step ``settings.model_fd_step`` of the box width), computed only
+    central differences of warm re-solves (step ``settings.fd_step`` of the box width), computed only
     for nonzero multipliers ``nu`` (n_g,). Builds its own NLP: about a second for a lap OCP.
     Raises ``RuntimeError`` if the model cannot realize ``c``."""
-    settings = settings or GMASettings()
+    settings = settings or ModelSettings()
     c = np.asarray(c, dtype=float).ravel()
     nu = np.zeros(problem.n_g) if nu is None else np.asarray(nu, dtype=float).ravel()
     if c.size != problem.n_c or nu.size != problem.n_g:
@@ -366,7 +281,7 @@ def lagrangian_gradient(problem: ModelProblem, c, nu=None, settings: GMASettings
                            f"{np.round(c, 6).tolist()} ({base.status})")
     grad = nlp.value_gradient(base)
     if np.any(nu != 0):
-        h = settings.model_fd_step * problem.c_width
+        h = settings.fd_step * problem.c_width
         for i in range(problem.n_c):
             dc = np.eye(problem.n_c)[i] * h[i]
             g_pm = []

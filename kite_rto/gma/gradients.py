@@ -4,8 +4,9 @@ Every strategy implements the small :class:`GradientEstimator` interface:
 
 * ``plan(c_k, lb, ub, past) -> list[np.ndarray]``: the extra setpoints (perturbation experiments) it needs
   around the operating point ``c_k``, given the finished experiments ``past``;
-* ``estimate(c_k, nominal, new, past) -> GradientEstimate``: the estimate from the nominal measurement at
-  ``c_k``, the results ``new`` of the planned experiments (same order) and ``past``.
+* ``estimate(c_k, nominal, new, past, model) -> GradientEstimate``: the estimate from the nominal measurement at
+  ``c_k``, the results ``new`` of the planned experiments (same order), ``past`` and the model's linearization
+  at ``c_k`` (a :class:`~kite_rto.gma.ModelRealization`; strategies that do not use it ignore it).
 
 A :class:`GradientEstimate` carries the gradient of the cost (n_c,), the Jacobian of the constraints
 (n_g, n_c) and a quality indicator (reciprocal condition number of the scaled design, 1 = ideal).
@@ -49,9 +50,9 @@ class GradientEstimate:
         method: name of the strategy that produced it.
         notes: free text (e.g. why a fallback was used).
         displacements: ``c_j - c_k`` (m, n_c) of the points whose differences from the nominal one the
-            estimate is a linear fit of (setpoint units), for the truncation bound of safe steps
-            (``GMASettings.safe_truncation``); ``None`` when the estimate is not such a fit (central differences,
-            whose error is of third order).
+            estimate is a linear fit of (setpoint units): a safe step predicts a change over a step that
+            extrapolates these differences more cautiously (:mod:`~kite_rto.gma.safe_step`); ``None`` when the
+            estimate is not such a fit (central differences, whose error is of third order).
     """
 
     cost: np.ndarray
@@ -64,14 +65,7 @@ class GradientEstimate:
 
 
 class GradientEstimator(ABC):
-    """Common interface of the plant-gradient strategies (see the module docstring).
-
-    ``uses_model``: a strategy that sets it True gets the model's linearization at ``c_k`` (a
-    :class:`~kite_rto.gma.ModelRealization`, with ``grad_phi`` and ``jac_g``) as ``estimate(..., model=...)``,
-    e.g. :class:`~kite_rto.gma.DirectionalGradient`, which takes the model's gradient outside its directions.
-    """
-
-    uses_model: bool = False
+    """Common interface of the plant-gradient strategies (see the module docstring)."""
 
     @abstractmethod
     def plan(self, c_k: np.ndarray, lb: np.ndarray, ub: np.ndarray,
@@ -80,33 +74,9 @@ class GradientEstimator(ABC):
 
     @abstractmethod
     def estimate(self, c_k: np.ndarray, nominal: PlantPoint, new: Sequence[PlantPoint],
-                 past: Sequence[PlantPoint]) -> GradientEstimate:
-        """Gradient estimate at ``c_k`` from the nominal result, the planned results and past points."""
-
-    def estimate_at(self, c_k, nominal, new, past, model=None) -> GradientEstimate:
-        """:meth:`estimate`, handing over the model's linearization ``model`` when the strategy
-        :attr:`uses_model`."""
-        if self.uses_model:
-            return self.estimate(c_k, nominal, new, past, model=model)
-        return self.estimate(c_k, nominal, new, past)
-
-    def plan_iteration(self, c_k: np.ndarray, lb: np.ndarray, ub: np.ndarray, past: Sequence[PlantPoint],
-                       iteration: int) -> list[np.ndarray]:
-        """:meth:`plan` for GMA's iteration ``iteration`` (>= 0), which is how :class:`~kite_rto.gma.GMA` asks.
-        A strategy whose perturbations depend on the iteration (``alternate``: the one-sided steps change side
-        from one iteration to the next) overrides it; the others plan as :meth:`plan`."""
-        return self.plan(c_k, lb, ub, past)
-
-
-def _alternate_flag(owner: str, value) -> bool:
-    if not isinstance(value, bool):
-        raise ValueError(f"{owner}.alternate={value!r}: expected True or False")
-    return value
-
-
-def _preferred_sign(alternate: bool, iteration: int) -> float:
-    """+1 (the step forward) unless ``alternate`` and ``iteration`` is odd."""
-    return -1.0 if alternate and iteration % 2 else 1.0
+                 past: Sequence[PlantPoint], model=None) -> GradientEstimate:
+        """Gradient estimate at ``c_k`` from the nominal result, the planned results, past points and the model's
+        linearization ``model`` at ``c_k``."""
 
 
 def _positive(name: str, value) -> np.ndarray:
@@ -122,21 +92,16 @@ class FiniteDifferenceGradient(GradientEstimator):
     Args:
         step: step ``h`` per setpoint, absolute setpoint units, scalar or shape (n_c,), ``> 0``.
         scheme: ``"forward"`` (error ``O(h)``) or ``"central"`` (error ``O(h^2)``, twice the experiments).
-        alternate: forward scheme only: step backwards in GMA's odd iterations (:meth:`plan_iteration`), so that
-            a filter averaging the gradients of an iterate that stays put averages a forward and a backward
-            quotient, whose ``h f''/2`` truncation errors cancel (a central difference spread over two
-            iterations, at no extra experiment).
 
     Perturbed setpoints are clipped to the setpoint box; a step that would leave the box is taken the other
     way instead. The differences always use the setpoints actually requested.
     """
 
-    def __init__(self, step, scheme: str = "forward", alternate: bool = False):
+    def __init__(self, step, scheme: str = "forward"):
         self.step = _positive("FiniteDifferenceGradient.step", step)
         if scheme not in ("forward", "central"):
             raise ValueError(f"FiniteDifferenceGradient.scheme={scheme!r}: expected 'forward' or 'central'")
         self.scheme = scheme
-        self.alternate = _alternate_flag("FiniteDifferenceGradient", alternate)
 
     @classmethod
     def from_noise(cls, noise_std: float, curvature, scheme: str = "forward",
@@ -168,21 +133,18 @@ class FiniteDifferenceGradient(GradientEstimator):
         return self.step
 
     def plan(self, c_k, lb, ub, past=()):
-        return self.plan_iteration(c_k, lb, ub, past, 0)
-
-    def plan_iteration(self, c_k, lb, ub, past, iteration):
-        c_k, prefer = np.asarray(c_k, float), _preferred_sign(self.alternate, iteration)
+        c_k = np.asarray(c_k, float)
         points = []
         for i, h in enumerate(self._steps(c_k.size)):
-            inside = lb[i] <= c_k[i] + prefer * h <= ub[i]
-            signs = (1.0, -1.0) if self.scheme == "central" else (prefer if inside else -prefer,)
+            inside = lb[i] <= c_k[i] + h <= ub[i]
+            signs = (1.0, -1.0) if self.scheme == "central" else (1.0 if inside else -1.0,)
             for s in signs:
                 c = c_k.copy()
                 c[i] = np.clip(c_k[i] + s * h, lb[i], ub[i])
                 points.append(c)
         return points
 
-    def estimate(self, c_k, nominal, new, past=()):
+    def estimate(self, c_k, nominal, new, past=(), model=None):
         c_k = np.asarray(c_k, float)
         n_c, n_g = c_k.size, np.size(nominal.constraints)
         per = 2 if self.scheme == "central" else 1
@@ -253,14 +215,11 @@ class LeastSquaresGradient(GradientEstimator):
         return chosen, float(s[-1] / s[0]) if s[0] > 0 else 0.0
 
     def plan(self, c_k, lb, ub, past=()):
-        return self.plan_iteration(c_k, lb, ub, past, 0)
-
-    def plan_iteration(self, c_k, lb, ub, past, iteration):
         c_k = np.asarray(c_k, float)
         _, rcond = self._select(c_k, past)
-        return [] if rcond >= self.rcond_min else self.fallback.plan_iteration(c_k, lb, ub, past, iteration)
+        return [] if rcond >= self.rcond_min else self.fallback.plan(c_k, lb, ub, past)
 
-    def estimate(self, c_k, nominal, new, past=()):
+    def estimate(self, c_k, nominal, new, past=(), model=None):
         c_k = np.asarray(c_k, float)
         if len(new) > 0:
             est = self.fallback.estimate(c_k, nominal, new, past)

@@ -60,6 +60,10 @@ class _Serializable:
     @classmethod
     def from_dict(cls, data: dict):
         kwargs = dict(data)
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(kwargs) - known)
+        if unknown:
+            raise ValueError(f"{cls.__name__}: unknown fields {unknown} (written by another version of kite_rto?)")
         for name in cls._arrays + cls._optional_arrays:
             if name in kwargs and kwargs[name] is not None:
                 kwargs[name] = np.asarray(_num(kwargs[name]), dtype=float)
@@ -73,30 +77,18 @@ class ExperimentRequest(_Serializable):
     Attributes:
         request_id: unique id (``"k<iteration>-<index>-<purpose>"``); a submitted id is never requested again.
         c: setpoints to apply, shape (n_c,), plant setpoint units.
-        purpose: ``"nominal"`` (the operating point ``c_k``), ``"perturbation"`` (gradient estimation),
-            ``"structure"`` (the structure check) or ``"repeat"`` (the same setpoints as ``repeat_of``, flown
-            again because the gradient was noisy, ``GMASettings.max_repeats_noise``).
+        purpose: ``"nominal"`` (the operating point ``c_k``) or ``"perturbation"`` (gradient estimation).
         iteration: the GMA iteration ``k`` the experiment belongs to.
-        settle_time: hint: how long to wait after applying ``c`` before measuring (generic units).
-        averaging: hint: how long to average the measurements (generic units, e.g. laps).
-        repeat_of: for a repeat, the ``request_id`` of the experiment it repeats (its results are averaged);
-            ``""`` otherwise (and then not written by :meth:`to_dict`, so records without repeats are unchanged).
+        effort: how long to measure, as a multiple of the unit the plant side defines (e.g. laps averaged):
+            ``GMASettings.effort_schedule`` of the iteration, ``> 0``.
     """
 
     request_id: str
     c: np.ndarray
     purpose: str
     iteration: int
-    settle_time: float = 0.0
-    averaging: float = 1.0
-    repeat_of: str = ""
+    effort: float = 1.0
     _arrays = ("c",)
-
-    def to_dict(self) -> dict:
-        out = super().to_dict()
-        if not self.repeat_of:
-            del out["repeat_of"]
-        return out
 
 
 @dataclass
@@ -142,14 +134,9 @@ class IterationRecord(_Serializable):
     ``u_star``, ``modified_cost``, ``modified_status``, ``c_star = y(u_star)``. Update: ``step`` (filtered,
     bounded), ``c_next``, relative trust radii ``trust_radius`` (used) and ``trust_radius_next``, ``converged``,
     ``decision`` (the text of a :class:`~kite_rto.gma.Decision`, read back with :attr:`outcome`), ``notes``,
-    wall-clock ``solve_time`` (s) and the ids of the experiments used. ``restored_directions``: directions
-    (setpoint units, one list of n_c per direction) that the structure check (``GMASettings.structure_check_every``)
-    added to the gradient estimator in this iteration (by the mismatch test or by the measured-KKT test,
-    ``GMASettings.structure_kkt``; the notes say which); empty otherwise (and in records written before it existed).
-    ``gradient_experiments``: how many of this iteration's experiments the gradient estimate used (the nominal and
-    the perturbations, each as often as it was flown, ``GMASettings.max_repeats_noise``; past points an estimator
-    reuses are not counted; 0 in records written before it existed). ``grad_cost_std``: the estimate's standard
-    deviation of each entry of ``grad_cost`` (n_c,), ``None`` without measured standard deviations.
+    wall-clock ``solve_time`` (s) and the ids of the experiments used, nominal first. ``grad_cost_std``: the
+    estimate's standard deviation of each entry of ``grad_cost`` (n_c,), ``None`` without measured standard
+    deviations.
     """
 
     k: int
@@ -183,8 +170,6 @@ class IterationRecord(_Serializable):
     notes: list[str]
     solve_time: float
     experiment_ids: list[str]
-    restored_directions: list = field(default_factory=list)
-    gradient_experiments: int = 0
     grad_cost_std: np.ndarray | None = None
     _optional_arrays = ("grad_cost_std",)
     _arrays = ("c_k", "constraints", "grad_cost", "jac_constraints", "g_hat", "grad_phi_hat", "jac_g_hat",

@@ -9,16 +9,46 @@ from ..flight.path import SetpointError, validate_setpoints
 from ..flight.shape import ShapeBox, setpoints_from_shape
 from ..kite.params import KiteParams, ParameterError
 from ..rto.ocp import ALTITUDES
+from ..gma import MECHANISMS
 from ..rto.settings import KiteRTOSettings
 from ..rto.wind_source import WIND_SOURCES
 from .parameters import ParamSpec
 
 __all__ = ["PARAMS", "RUN_INDEPENDENT", "cross_check", "run_settings", "settings_from_params"]
 
-_SLOPE_NAMES = {True: "true", False: "false", "extrapolated": "extrapolated", "terms": "terms"}
-"""``GMASettings.safe_model_slope`` -> the string of the ``safe_model_slope`` parameter."""
 _S = KiteRTOSettings()
 _E = _S.experiment
+
+
+def _mechanism(path: str, description: str, low: float, high: float, unit: str = "") -> ParamSpec:
+    """The parameter ``<mechanism>.<field>`` of one of GMA's mechanisms, defaulting to the kite's value."""
+    name, field = path.split(".")
+    return ParamSpec(path, getattr(getattr(_S.gma, name), field), description, low, high, unit=unit)
+
+
+_MECHANISM_PARAMS = (
+    _mechanism("modifier_filter.gain", "fixed filter gain b of the gradient modifiers (where no noise-matched gain "
+               "applies; 1 = no filtering)", 0.01, 1.0, "dimensionless"),
+    _mechanism("noise_filter.drift", "noise-matched modifier filter: bound on the plant-model curvature mismatch "
+               "(larger forgets modifiers measured far away sooner)", 0.0, 1.0e6, "cost units per squared box width"),
+    _mechanism("noise_filter.constraint_drift", "noise-matched filter of the altitude's gradient modifier, fed "
+               "with the altitude's own noise", 0.0, 1.0e6, "m per squared box width"),
+    _mechanism("trust_region.radius", "initial trust radius (not below trust_region.min_radius)", 0.01, 10.0,
+               "box widths"),
+    _mechanism("trust_region.min_radius", "smallest trust radius the adaptation leaves", 0.001, 10.0, "box widths"),
+    _mechanism("safe_step.curvature", "prior bound on the altitude constraint's curvature (grows to what the "
+               "measured steps show)", 0.0, 1.0e6, "m per squared box width"),
+    _mechanism("safe_step.sigma", "standard deviations of the measured altitude and of its predicted change",
+               0.0, 100.0, "standard deviations"),
+    _mechanism("safe_step.tolerance", "how far below h_min a step may be predicted to take the kite", 0.0, 1000.0,
+               "m"),
+    _mechanism("safe_step.learn_min_step", "shortest step the curvature bound learns from", 0.0, 1.0, "box widths"),
+    _mechanism("undo.sigma", "a step after which the measured cost rose by more than this is undone: back to the "
+               "previous point, the trust region narrowed where the step moved", 0.0, 100.0, "standard errors"),
+    _mechanism("bound_hold.sigma", "a setpoint at a bound an earlier step reached stays there unless the held "
+               "problem's multiplier of it exceeds this", 0.0, 100.0, "standard deviations of the cost modifier"),
+    _mechanism("bound_hold.after", "first iteration that holds bounds", 0, 1000, "iterations"),
+)
 PARAMS = (
     ParamSpec("db", "rto.sqlite", "SQLite file of experiments and iterations (resume source), in an existing "
               "directory"),
@@ -33,11 +63,8 @@ PARAMS = (
               unit="iterations", runtime=True),
     ParamSpec("exit_when_done", False, "exit (code 0) once n_iter iterations are done (needs n_iter > 0)",
               runtime=True),
-    ParamSpec("n_laps", _E.n_laps, "whole laps averaged per experiment of the first iteration (n_laps_factor "
-              "times as many from the second on)", 1, 100, unit="laps"),
-    ParamSpec("n_laps_factor", float(_S.gma.averaging_schedule[-1]), "experiments from the second iteration on "
-              "average n_laps times this many laps, rounded (near the optimum a short experiment's gradient is as "
-              "large as its noise; 1 = as many as the first iteration's)", 1.0, 10.0, unit="dimensionless"),
+    ParamSpec("n_laps", _E.n_laps, "whole laps averaged per experiment at effort 1 (effort_schedule: GMA's "
+              "multiples of it by iteration)", 1, 100, unit="laps"),
     ParamSpec("settle_laps", _E.settle_laps, "whole laps dropped after a setpoint change", 0, 100, unit="laps"),
     ParamSpec("settle_time", _E.settle_time, "simulated time after a setpoint change before a lap may count "
               "(< max_duration)", 0.0, 600.0, unit="s"),
@@ -56,51 +83,26 @@ PARAMS = (
               "none is held under the default prior)", 1, 3, unit="directions"),
     ParamSpec("fd_step", float(_S.fd_step[0]), "finite-difference step (directional: along each direction)",
               0.01, 1.0, unit="fraction of the shape box width"),
-    ParamSpec("filter_gain", _S.gma.filter_gain, "GMA input filter K", 0.01, 1.0, unit="dimensionless"),
-    ParamSpec("modifier_filter", _S.gma.modifier_filter, "GMA filter on the gradient modifiers (1 = none)", 0.01, 1.0,
+    ParamSpec("filter_gain", _S.gma.filter_gain, "GMA input filter K (1 = full steps)", 0.01, 1.0,
               unit="dimensionless"),
-    ParamSpec("modifier_drift", -1.0 if _S.gma.modifier_drift is None else _S.gma.modifier_drift,
-              "GMA modifier filter matched to the gradient noise: bound on the plant-model curvature mismatch "
-              "(negative = off: the fixed modifier_filter, and the altitude modifier's own noise filter off too)",
-              -1.0, 1.0e6, unit="cost units per squared box width"),
-    ParamSpec("model_secant", _S.gma.model_secant, "GMA gradient modifiers from the model's own difference "
-              "quotients over the flown points (cancels the finite differences' truncation error up to the "
-              "plant-model curvature mismatch; false: plant quotient minus the model's gradient)"),
-    ParamSpec("model_secant_cost", _S.gma.model_secant_cost, "with model_secant: correct the cost gradient too "
-              "(false: only the altitude constraint's, whose model is the reference figure-eight's geometry; the cost "
-              "keeps the plant's quotients)"),
+    ParamSpec("backoff", _S.gma.backoff, "GMA tightens the modified altitude constraint by this much", 0.0, 1000.0,
+              unit="m"),
+    ParamSpec("effort_schedule", list(_S.gma.effort_schedule), "experiment length by GMA iteration, as multiples of "
+              "n_laps (the last one holds for every later iteration; near the optimum a short experiment's gradient "
+              "is as large as its noise)", 0.1, 100.0, unit="multiples of n_laps", any_length=True),
+    ParamSpec("mechanisms", [n for n in MECHANISMS if getattr(_S.gma, n) is not None], "GMA's mechanisms that are "
+              "on, each set by its <mechanism>.<field> parameters (docs/gma.md)", choices=tuple(MECHANISMS)),
     ParamSpec("altitude_constraint", _S.altitude, "what the model's altitude constraint bounds: the lowest point "
               "of the reference figure-eight of the lap's setpoints (reference: a function of the setpoints alone, "
               "the path controller's tracking error left to GMA's modifiers) or of the model's own free lap (lap)",
               choices=ALTITUDES),
-    ParamSpec("trust_radius", _S.gma.trust_radius, "initial trust radius (not below GMA's minimum trust radius)",
-              _S.gma.trust_radius_min, 10.0, unit="fraction of the box width"),
-    ParamSpec("reject_sigma", -1.0 if _S.gma.reject_sigma is None else _S.gma.reject_sigma, "GMA undoes a step "
-              "after which the measured cost rose by more than this many standard errors: back to the previous "
-              "point, the trust radius halved where the step moved (negative = never)", -1.0, 100.0,
-              unit="standard errors"),
-    ParamSpec("bound_sigma", -1.0 if _S.gma.bound_sigma is None else _S.gma.bound_sigma, "GMA holds a setpoint "
-              "at a bound of the shape box from the third iteration on unless the held problem's multiplier of it "
-              "exceeds this many standard deviations of the cost modifier (negative = never)", -1.0, 100.0,
-              unit="standard deviations"),
-    ParamSpec("bound_sigma_start", _S.gma.bound_sigma_start, "bound_sigma also holds a setpoint at the bound the run "
-              "started on (the model optimum's); false holds only bounds the iterates reached by a step, so the "
-              "measurements can move the iterate off a bound the model chose"),
-    ParamSpec("safe_both_ends", _S.gma.safe_both_ends, "GMA's safe step learns the altitude constraint's curvature "
-              "from both ends of each past step: the gradient at its end predicting its start too (false: from its "
-              "start only)"),
-    ParamSpec("safe_model_slope", _SLOPE_NAMES[_S.gma.safe_model_slope], "GMA's safe step predicts the altitude "
-              "constraint's change with the worse of the measured and the model's slope: true (always), false "
-              "(never: the measured slope), extrapolated (when the step extrapolates a difference flown on the other "
-              "side of the setpoints), terms (for the extrapolated part of the step alone)",
-              choices=tuple(_SLOPE_NAMES.values())),
     ParamSpec("box_theta_0_deg", [round(math.degrees(v), 9) for v in _S.box.theta_0], "optimizer's theta_0 range [low, high]",
               1.0, 89.0, unit="deg"),
     ParamSpec("box_A_phi_deg", [round(math.degrees(v), 9) for v in _S.box.A_phi], "optimizer's A_phi range [low, high]",
               0.1, 89.0, unit="deg"),
     ParamSpec("box_aspect", list(_S.box.aspect), "optimizer's aspect range [low, high], aspect = A_theta / "
               "sqrt(sin theta_0 A_phi); every point of the box must be trackable", 0.01, 2.0, unit="dimensionless"),
-)
+) + _MECHANISM_PARAMS
 
 
 RUN_INDEPENDENT = ("db", "resume", "storage_timeout", "autostart", "n_iter", "exit_when_done")
@@ -143,25 +145,26 @@ def _shape_box(v: dict) -> ShapeBox:
     return box
 
 
+def _gma_settings(v: dict):
+    """GMA's settings from the parameters: the listed mechanisms from their dotted parameters, the others off."""
+    on = set(v["mechanisms"])
+    subs = {}
+    for name, cls in MECHANISMS.items():
+        fields = {spec.name.split(".")[1]: v[spec.name] for spec in _MECHANISM_PARAMS
+                  if spec.name.startswith(name + ".")}
+        subs[name] = cls(**fields) if name in on else None
+    return replace(_S.gma, filter_gain=v["filter_gain"], backoff=v["backoff"],
+                   effort_schedule=tuple(v["effort_schedule"]), **subs)
+
+
 def settings_from_params(v: dict) -> KiteRTOSettings:
     """The run's settings from the parameter values ``v``; :class:`ParameterError` names a bad value."""
     try:
         spec = replace(_E, n_laps=v["n_laps"], settle_laps=v["settle_laps"], settle_time=v["settle_time"],
                        max_duration=v["max_duration"], normalize=v["normalize"], wind_source=v["wind_source"],
                        h_min=v["h_min"])
-        drift = None if v["modifier_drift"] < 0 else v["modifier_drift"]
         return replace(_S, experiment=spec, box=_shape_box(v), gradient=v["gradient"],
-                       n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3, altitude=v["altitude_constraint"]
-                       ).with_gma(filter_gain=v["filter_gain"], modifier_filter=v["modifier_filter"],
-                                  modifier_drift=drift, model_secant=v["model_secant"],
-                                  model_secant_cost=v["model_secant_cost"], trust_radius=v["trust_radius"],
-                                  averaging_schedule=(1.0, v["n_laps_factor"]),
-                                  reject_sigma=None if v["reject_sigma"] < 0 else v["reject_sigma"],
-                                  bound_sigma=None if v["bound_sigma"] < 0 else v["bound_sigma"],
-                                  bound_sigma_start=v["bound_sigma_start"],
-                                  safe_both_ends=v["safe_both_ends"],
-                                  safe_model_slope={n: k for k, n in _SLOPE_NAMES.items()}[v["safe_model_slope"]],
-                                  # the altitude's own noise filter is part of the noise-matched one
-                                  constraint_drift=None if drift is None else _S.gma.constraint_drift)
+                       n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3, altitude=v["altitude_constraint"],
+                       gma=_gma_settings(v))
     except ValueError as err:
         raise ParameterError(str(err)) from None

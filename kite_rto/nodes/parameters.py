@@ -22,7 +22,8 @@ class ParamSpec:
     """A declared parameter: name, default, description, unit, allowed values, and whether it may change live.
 
     ``low``/``high`` bound a number, or every element of a list-valued parameter; ``choices`` lists the allowed
-    strings; ``unit`` is shown with the description ("" for flags, names and counts without a unit);
+    strings (of a string, or of each element of a list of strings); a list-valued parameter has the default's
+    length unless ``any_length`` (then one or more elements); ``unit`` is shown with the description ("" for flags, names and counts without a unit);
     ``runtime`` marks a parameter the running node applies when it is set (``ros2 param set``); every other one
     is read-only while the node runs.
     """
@@ -35,6 +36,7 @@ class ParamSpec:
     choices: tuple = ()
     unit: str = ""
     runtime: bool = False
+    any_length: bool = False
 
     @property
     def doc(self) -> str:
@@ -47,6 +49,8 @@ class ParamSpec:
         d = self.default
         if isinstance(d, bool):
             return "true or false"
+        if isinstance(d, (list, tuple)) and d and isinstance(d[0], str):
+            return "a list of distinct names, each one of " + ", ".join(map(repr, self.choices))
         if self.choices:
             return "one of " + ", ".join(map(repr, self.choices))
         if isinstance(d, str):
@@ -54,7 +58,8 @@ class ParamSpec:
         rng = ("" if self.low is None and self.high is None
                else f"[{_bound(self.low, '-inf')}, {_bound(self.high, 'inf')}]")
         if isinstance(d, (list, tuple)):
-            return f"a list of {len(d)} numbers" + (f", each in {rng}" if rng else "") + unit
+            count = "1 or more" if self.any_length else str(len(d))
+            return f"a list of {count} numbers" + (f", each in {rng}" if rng else "") + unit
         kind = "an integer" if isinstance(d, int) else "a number"
         return f"{kind} in {rng}{unit}" if rng else kind + unit
 
@@ -84,9 +89,14 @@ class ParamSpec:
             if not isinstance(value, str):
                 return False
             return value in self.choices if self.choices else value != ""
+        if isinstance(d, (list, tuple)) and d and isinstance(d[0], str):
+            return (isinstance(value, (list, tuple)) and len(value) > 0 and len(set(value)) == len(value)
+                    and all(isinstance(v, str) and v in self.choices for v in value))
         if isinstance(d, (list, tuple)):
-            return (isinstance(value, (list, tuple, array.array)) and len(value) == len(d)
-                    and all(self._number_ok(v, float) for v in value))
+            if not isinstance(value, (list, tuple, array.array)):
+                return False
+            size_ok = len(value) > 0 if self.any_length else len(value) == len(d)
+            return size_ok and all(self._number_ok(v, float) for v in value)
         return self._number_ok(value, int if isinstance(d, int) else float)
 
     def _number_ok(self, value, kind) -> bool:
@@ -173,7 +183,7 @@ def _normalized(spec: ParamSpec, value):
     if isinstance(spec.default, float) and isinstance(value, int) and not isinstance(value, bool):
         return float(value)
     if isinstance(spec.default, (list, tuple)):
-        return [float(v) for v in value]
+        return [v if isinstance(v, str) else float(v) for v in value]
     return value
 
 

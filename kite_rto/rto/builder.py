@@ -114,4 +114,4 @@ def make_gma(settings: KiteRTOSettings | None = None, model_params: KiteParams |
     x0 = np.clip(shape_from_setpoints(c0), settings.box.lower(), settings.box.upper())
     directions = gma_directions(settings, model_params, ocp).directions if settings.gradient == "directional" \
         else None
-    return GMA(problem, settings.gma_settings(), settings.gradient_estimator(directions), c0=x0, history=history)
+    return GMA(problem, settings.gma, settings.gradient_estimator(directions), c0=x0, history=history)

@@ -19,7 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..gma import (BoundActivity, GMASettings, PrivilegedDirections, bound_side, lagrangian_gradient, model_optimum,
+from ..gma import (BoundActivity, ModelSettings, PrivilegedDirections, bound_side, lagrangian_gradient, model_optimum,
                    privileged_directions, robust_bounds)
 from .ocp import KiteOCPSettings, model_problem
 from ..kite.params import KiteParams, ParameterError
@@ -108,7 +108,7 @@ def privileged_directions_for(box: ShapeBox, x0: tuple, nu: tuple, model_params:
     gradient-only test of :func:`~kite_rto.gma.privileged_directions` then decides alone)."""
     x0 = np.asarray(x0, dtype=float)
     nu = np.asarray(nu, dtype=float)
-    settings, names = GMASettings(), uncertainty.names()
+    settings, names = ModelSettings(), uncertainty.names()
 
     def gradient(theta):
         params = replace(model_params, **dict(zip(names, (float(t) for t in theta))))

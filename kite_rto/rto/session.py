@@ -94,12 +94,11 @@ class RTOSession:
         self.evaluator.start(t, self.c, self._laps())
 
     def _laps(self) -> int | None:
-        """Laps the open request averages: the spec's ``n_laps`` scaled by the request's averaging hint over GMA's
-        ``averaging`` setting (``GMASettings.averaging_schedule``), at least 1; None without a request."""
+        """Laps the open request averages: the spec's ``n_laps`` times the request's effort
+        (``GMASettings.effort_schedule``), rounded, at least 1; None without a request."""
         if self.request is None:
             return None
-        ratio = self.request.averaging / self.gma.settings.averaging
-        return max(1, int(round(self.spec.n_laps * ratio)))
+        return max(1, int(round(self.spec.n_laps * self.request.effort)))
 
     def on_measurement(self, m) -> np.ndarray | None:
         """Feed one plant measurement; returns new setpoints (rad, (3,)) when they must change, else None.

@@ -44,7 +44,7 @@ def _parser() -> argparse.ArgumentParser:
                     help="a baseline's flight time over GMA's time to 99 %% on the same scenario and seed")
     ap.add_argument("--variant", action="append", default=[], metavar="NAME=FIELD=VALUE[,FIELD=VALUE]",
                     help="a GMA variant: KiteRTOSettings fields changed from the defaults, e.g. "
-                         "sc=gma.structure_check_every=3 (repeatable; NAME gma changes the reference)")
+                         "undo2=gma.undo.sigma=2.0 (repeatable; NAME gma changes the reference)")
     ap.add_argument("--variants", metavar="MODULE:NAME", help="a mapping name -> KiteRTOSettings to import")
     ap.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler (default: a LocalCluster)")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="LocalCluster worker processes")
