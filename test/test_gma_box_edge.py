@@ -1,4 +1,4 @@
-"""Model gradients at the edge of the setpoint box (issue 14 item 5).
+"""Model gradients at the edge of the setpoint box.
 
 Model: phi = (u1 - 0.5)^2 + (u2 - 1.5)^2, g = u1 + u2 - 10 <= 0 (never active), y = u, and the bounds of u are
 the setpoint box [0, 2]^2. At c = (2, 1) the input u1 = c1 sits at its bound; the bound holds because y(u) = c
@@ -33,7 +33,7 @@ class ExactPlantGradient(GradientEstimator):
     def plan(self, c_k, lb, ub, past=()):
         return []
 
-    def estimate(self, c_k, nominal, new, past=()):
+    def estimate(self, c_k, nominal, new, past=(), model=None):
         return GradientEstimate(np.array([2 * (c_k[0] - 2.2), 2 * (c_k[1] - 1)]), np.array([[1.0, 1.0]]), 1.0,
                                 None, "exact")
 
@@ -47,8 +47,8 @@ def test_consistent_model_gradient_is_exact_on_the_box_edge(c, grad):
     np.testing.assert_allclose(model.jac_g, [[1.0, 1.0]], atol=1e-9)
 
 
-def test_the_issue_reproduction_and_the_right_inverse_on_the_edge():
-    """The issue's lines verbatim (default name, default settings): [3, -1], not [1.5, -1]. At u = (2, 1) the
+def test_the_reproduction_and_the_right_inverse_on_the_edge():
+    """The original report's lines verbatim (default name, default settings): [3, -1], not [1.5, -1]. At u = (2, 1) the
     bound row of u1 equals the first row of dy: it is left out, and R is the identity (dy R = I exactly)."""
     u = ca.SX.sym("u", 2)
     P = ModelProblem(u=u, cost=(u[0] - .5) ** 2 + (u[1] - 1.5) ** 2, constraints=u[0] + u[1] - 10, outputs=u,
@@ -71,7 +71,7 @@ def test_right_inverse_still_holds_inputs_that_y_does_not_fix():
 
 
 def test_full_steps_reach_an_optimum_on_the_edge_in_two_iterations():
-    gma = GMA(edge_problem(), GMASettings(filter_gain=1.0, trust_radius=np.inf, trust_adapt=False),
+    gma = GMA(edge_problem(), GMASettings(filter_gain=1.0, trust_region=None),
               ExactPlantGradient())
     np.testing.assert_allclose(gma.c, [0.5, 1.5], atol=1e-6)          # started at the model optimum
     run_offline(gma, plant, 4)

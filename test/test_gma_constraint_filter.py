@@ -1,5 +1,4 @@
-"""The constraint modifiers' own noise-matched gain (``GMASettings.constraint_drift``) and trust regions that a safe
-step does not shrink (``GMASettings.safe_shrink``), issue #14 items 3 and 4.
+"""The constraint modifiers' own noise-matched gain (``NoiseFilter.constraint_drift``).
 
 Closed-form problem, setpoints c in [0, 2]^2: the model and the plant share the cost |c - (2, 2)|^2 and differ in
 the constraint, model g = c1 + c2 - 2.5, plant g_p = c1 + c2 - 2.5 + 0.5 (c1 - 0.5)^2, so the constraint-gradient
@@ -10,7 +9,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from kite_rto.gma import GMA, ExperimentResult, FiniteDifferenceGradient, GMASettings, ModelProblem, run_offline
+from kite_rto.gma import (GMA, ExperimentResult, FiniteDifferenceGradient, GMASettings, ModelProblem, NoiseFilter,
+                          TrustRegion, run_offline)
 from kite_rto.gma.noise_filter import noise_gain
 
 COST_STD, G_STD = 0.05, 1e-4
@@ -32,8 +32,9 @@ def noisy_plant(seed):
     return plant
 
 
-def run(seed, **changes):
-    s = GMASettings(modifier_drift=1.0, trust_radius=0.1, trust_radius_min=0.05, **changes)
+def run(seed, constraint_drift=None):
+    s = GMASettings(noise_filter=NoiseFilter(drift=1.0, constraint_drift=constraint_drift),
+                    trust_region=TrustRegion(radius=0.1, min_radius=0.05))
     gma = GMA(model(), s, FiniteDifferenceGradient(0.2), c0=[0.5, 0.5])
     run_offline(gma, noisy_plant(seed), 8)
     return gma.records
@@ -70,27 +71,7 @@ def test_the_gain_is_the_filters_with_the_constraints_noise():
 
 
 def test_settings_name_bad_values():
-    with pytest.raises(ValueError, match="constraint_drift=-1.0"):
-        GMASettings(modifier_drift=1.0, constraint_drift=-1.0)
-    with pytest.raises(ValueError, match="constraint_drift=2.0 needs modifier_drift"):
-        GMASettings(constraint_drift=2.0)
-    with pytest.raises(ValueError, match="safe_shrink=0: expected True or False"):
-        GMASettings(safe_shrink=0)
-
-
-@pytest.mark.parametrize("shrink", [True, False])
-def test_safe_shrink_decides_whether_a_shortened_step_shrinks_the_trust_region(shrink):
-    """test_gma_safety's problem (the model's constraint curves, the plant's does not): safe steps shorten the
-    steps either way and no iterate violates; only with ``safe_shrink`` does each shortened step also halve the
-    trust radius (trust_adapt off, so nothing else changes it)."""
-    from test_gma_safety import model as safe_model, plant as safe_plant
-    gma = GMA(safe_model(), GMASettings(safe_curvature=0.0, safe_shrink=shrink, trust_adapt=False), c0=[0.5, 0.5])
-    run_offline(gma, safe_plant, 15)
-    cut = [r for r in gma.records if any(n.startswith("safe step: scaled by") for n in r.notes)]
-    assert cut and max(r.constraints[0] for r in gma.records) <= 1e-6
-    for r in cut:
-        if shrink:
-            np.testing.assert_allclose(r.trust_radius_next, np.maximum(0.5 * r.trust_radius, 0.01))
-        else:
-            np.testing.assert_allclose(r.trust_radius_next, r.trust_radius)
-            assert not any(n.endswith("trust region shrunk") for n in r.notes)
+    with pytest.raises(ValueError, match=r"NoiseFilter.constraint_drift=-1.0: expected every value in \[0.0, inf\]"):
+        NoiseFilter(drift=1.0, constraint_drift=-1.0)
+    with pytest.raises(ValueError, match=r"NoiseFilter.constraint_drift=\[1.0, nan\]"):
+        NoiseFilter(constraint_drift=[1.0, float("nan")])

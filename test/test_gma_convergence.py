@@ -12,7 +12,7 @@ import pytest
 from scipy.optimize import minimize
 
 from kite_rto.gma import (GMA, FiniteDifferenceGradient, GMASettings, GradientEstimate, GradientEstimator,
-                          ModelProblem, run_offline)
+                          ModelProblem, ModelSettings, run_offline)
 
 
 class ExactGradient(GradientEstimator):
@@ -24,7 +24,7 @@ class ExactGradient(GradientEstimator):
     def plan(self, c_k, lb, ub, past=()):
         return []
 
-    def estimate(self, c_k, nominal, new, past=()):
+    def estimate(self, c_k, nominal, new, past=(), model=None):
         return GradientEstimate(self.grad_cost(c_k), self.jac_constraints(c_k), 1.0, None, "exact")
 
 
@@ -77,7 +77,7 @@ def test_standard_ma_iteration_matches_hand_computed_step():
     prob = problem_a()
     gp = lambda c: np.array([2 * (c[0] - 1), 4 * (c[1] - 1)])
     jp = lambda c: np.array([[1.0, 1.0]])
-    gma = GMA(prob, GMASettings(filter_gain=1.0, trust_radius=np.inf), ExactGradient(gp, jp), c0=[0.2, 0.4])
+    gma = GMA(prob, GMASettings(filter_gain=1.0, trust_region=None), ExactGradient(gp, jp), c0=[0.2, 0.4])
     rec = run_offline(gma, plant_a, 1).iterations[0]
     ck = np.array([0.2, 0.4])
     eps = plant_a(ck)[1] - (0.9 * ck[0] + ck[1] - 2.2)
@@ -144,10 +144,10 @@ def test_b_with_past_operating_points_needs_fewer_experiments():
 
 
 def test_b_literal_spec_realization_point_misses_the_constraint():
-    """Documented limitation: with model_point='realization' the modified problem uses model inputs that
+    """Documented limitation: with ``ModelSettings(point="realization")`` the modified problem uses model inputs that
     y(u) does not fix (u4 enters g1) differently from u_hat(c_k); its fixed point violates the plant
     constraint. The default 'consistent' point (tests above) reaches the plant KKT point."""
-    gma = GMA(problem_b(), GMASettings(filter_gain=0.7, model_point="realization"),
+    gma = GMA(problem_b(), GMASettings(filter_gain=0.7, model=ModelSettings(point="realization")),
               FiniteDifferenceGradient([1e-5, 1e-5], "central"))
     run_offline(gma, plant_b, 40, stop_on_convergence=True)
     assert gma.converged

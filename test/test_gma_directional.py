@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from kite_rto.gma import (GMA, DirectionalGradient, GMASettings, ModelProblem, PlantPoint, lagrangian_gradient,
-                          privileged_directions, run_offline)
+from kite_rto.gma import (GMA, DirectionalGradient, GMASettings, ModelProblem, PlantPoint, TrustRegion,
+                          lagrangian_gradient, privileged_directions, run_offline)
 
 
 class Model:
@@ -178,7 +178,7 @@ def test_gma_with_dma_reaches_the_plant_optimum_when_the_mismatch_lies_in_span_u
     # forward differences of step h along d carry the bias h d^T H d / 2 (H = 2 I): the fixed point moves by
     # -h/2 d, 5e-5 here (0.025 d with h = 0.05)
     h = 1e-4
-    gma = GMA(quad_model(), GMASettings(filter_gain=1.0, trust_radius=1.0),
+    gma = GMA(quad_model(), GMASettings(filter_gain=1.0, trust_region=TrustRegion(radius=1.0)),
               DirectionalGradient(d, step=h, reuse=reuse))
     run_offline(gma, plant, 12)
     n_exp = len(gma.history.experiments)

@@ -1,13 +1,14 @@
-"""Modifiers from the model's own difference quotients (``GMASettings.model_secant``, gma/model_secant.py): with
-large finite-difference steps GMA's fixed point is where the plant's *secant* vanishes, half a step from the plant
-optimum; taking the model's secant over the same points cancels that error up to the curvature mismatch."""
+"""Constraint modifiers from the model's own difference quotients (:class:`~kite_rto.gma.ModelSecant`,
+gma/model_secant.py): with large finite-difference steps the measured constraint Jacobian is the plant's *secant*;
+taking the model's secant over the same points cancels that error up to the curvature mismatch. The cost keeps the
+plant's quotients (``ModelSecant`` replaced ``model_secant=True``, which also corrected the cost by default)."""
 import casadi as ca
 import numpy as np
 import pytest
 from scipy.optimize import minimize
 
 from kite_rto.gma import (GMA, DirectionalGradient, ExperimentResult, FiniteDifferenceGradient, GMASettings,
-                          LeastSquaresGradient, ModelProblem, PlantPoint, run_offline)
+                          LeastSquaresGradient, ModelProblem, ModelSecant, PlantPoint, TrustRegion, run_offline)
 from kite_rto.gma.model_secant import ModelPoint, model_secant_estimate
 
 
@@ -32,35 +33,54 @@ def plant_optimum(extra_curvature=0.0):
                     constraints=[{"type": "ineq", "fun": lambda c: -plant(c, extra_curvature)[1]}]).x
 
 
+def settings(secant):
+    """Full steps, a trust radius of one box width, the model secant on or off."""
+    return GMASettings(filter_gain=1.0, trust_region=TrustRegion(radius=1.0),
+                       model_secant=ModelSecant() if secant else None)
+
+
 @pytest.mark.parametrize("secant", [True, False])
-def test_large_directional_steps_reach_the_plant_optimum_only_with_the_model_secant(secant):
-    """DMA along d with a step of 0.5: the plant's secant alone puts the fixed point at c_opt - h/2 d (the
-    truncation error h d^T H d / 2 with H = 2 I); the model's secant over the same points has the same error."""
+def test_the_cost_keeps_the_plants_secant(secant):
+    """DMA along d with a step of 0.5: the plant's secant puts the fixed point at c_opt - h/2 d (the truncation
+    error h d^T H d / 2 of the cost with H = 2 I; the constraint is inactive there). The model secant corrects the
+    constraints only, whose quotients are exact here (both linear): it leaves the fixed point where it is (the old
+    default, which also corrected the cost, reached c_opt)."""
     h = 0.5
-    gma = GMA(model(), GMASettings(filter_gain=1.0, trust_radius=1.0, model_secant=secant),
-              DirectionalGradient(D, step=h, reuse=False))
+    gma = GMA(model(), settings(secant), DirectionalGradient(D, step=h, reuse=False))
     run_offline(gma, plant, 10)
-    expected = plant_optimum() if secant else plant_optimum() - h / 2 * D
-    np.testing.assert_allclose(gma.c, expected, atol=1e-6)
+    np.testing.assert_allclose(gma.c, plant_optimum() - h / 2 * D, atol=1e-6)
+    assert np.linalg.norm(gma.c - plant_optimum()) > 0.1
     assert any("model secant" in n for n in gma.records[-1].notes) == secant
 
 
-def test_forward_differences_keep_only_the_curvature_mismatch():
-    """Coordinate forward differences of 0.4 on a plant curving more than the model in c[0] (2 + 2 x 1.5 against
-    2): with the model secant the error is the mismatch's, (3 h / 2) in the first gradient component, instead of
-    the whole curvature's (5 h / 2); both leave c[1] where its plant gradient vanishes (same curvature)."""
-    h, k = 0.4, 1.5
-    c_opt = plant_optimum(k)
-    ends = {}
-    for secant in (False, True):
-        gma = GMA(model(), GMASettings(filter_gain=1.0, trust_radius=1.0, model_secant=secant),
-                  FiniteDifferenceGradient(h))
-        run_offline(gma, lambda c: plant(c, k), 15)
-        ends[secant] = gma.c
-    # the constraint is active at the plant optimum, so the error moves the point along it: compare distances
-    err = {s: np.linalg.norm(ends[s] - c_opt) for s in ends}
-    assert err[True] < 0.7 * err[False]
-    assert err[False] > 0.05
+def ellipse_model():
+    u = ca.SX.sym("u", 2)
+    return ModelProblem(u=u, cost=-(u[0] + u[1]), constraints=2 * u[0] ** 2 + u[1] ** 2 - 4, outputs=u, lbu=-5,
+                        ubu=5, u0=[0, 0], c_lb=[-2, -2], c_ub=[2.5, 2.5], name="ellipse")
+
+
+def ellipse_plant(c):
+    return -(c[0] + c[1]), np.array([2.5 * c[0] ** 2 + c[1] ** 2 - 4])
+
+
+def on_plant_constraint(offset):
+    """The point with c1 = 2.5 c0 + offset on the plant's constraint 2.5 c0^2 + c1^2 = 4 (c0 > 0)."""
+    a, b, cc = 2.5 + 6.25, 5 * offset, offset ** 2 - 4
+    c0 = (-b + np.sqrt(b * b - 4 * a * cc)) / (2 * a)
+    return np.array([c0, 2.5 * c0 + offset])
+
+
+@pytest.mark.parametrize("secant, offset", [(False, 0.3), (True, 0.1)])
+def test_forward_differences_keep_only_the_curvature_mismatch(secant, offset):
+    """Linear cost -(c0 + c1) (exact quotients), constraint Hessians diag(4, 2) in the model and diag(5, 2) in the
+    plant. Forward differences of h = 0.4 measure grad g_p + h/2 diag(5, 2); with the model secant, grad g_p +
+    h/2 diag(5 - 4, 2 - 2), the mismatch's error alone. The fixed point is on the plant's constraint where the
+    measured Jacobian is parallel to (1, 1): 5 c0 + b0 = 2 c1 + b1, i.e. c1 = 2.5 c0 + (b0 - b1) / 2, an offset
+    of 0.3 from the plant's secant and 0.1 with the model's (0 at the plant optimum)."""
+    gma = GMA(ellipse_model(), settings(secant), FiniteDifferenceGradient(0.4))
+    run_offline(gma, ellipse_plant, 20)
+    assert gma.converged
+    np.testing.assert_allclose(gma.c, on_plant_constraint(offset), atol=1e-6)
 
 
 def test_model_points_are_solved_only_when_read_and_keep_the_plant_noise():
@@ -102,13 +122,13 @@ def test_a_model_that_cannot_realize_a_point_leaves_the_plant_estimate():
 
 
 def test_bad_setting_is_named():
-    with pytest.raises(ValueError, match="model_secant='yes': expected True or False"):
+    with pytest.raises(ValueError, match=r"GMASettings.model_secant='yes': expected ModelSecant\(...\) or None"):
         GMASettings(model_secant="yes")
 
 
 def curved_quotients():
     """Forward differences of 0.5 at 0 of a curved cost ``c^T c`` and constraint ``c_0^2`` (the model's gradients at
-    0 are zero for both): ``(plant estimate, correct(**options) -> model_secant_estimate(...))``."""
+    0 are zero for both): ``(plant estimate, model_secant_estimate(...))``."""
     fd = FiniteDifferenceGradient(0.5)
     c_k = np.zeros(2)
 
@@ -121,58 +141,15 @@ def curved_quotients():
     new = [pt(p) for p in fd.plan(c_k, -np.ones(2), np.ones(2))]
     plant_est = fd.estimate(c_k, pt(c_k), new)
     m = type("M", (), {"grad_phi": np.zeros(2), "jac_g": np.zeros((1, 2))})()
-    return plant_est, lambda **kw: model_secant_estimate(fd, plant_est, c_k, pt(c_k), new, [], m, values, **kw)
-
-
-def test_cost_only_keeps_the_plant_constraint_quotients():
-    """``model_secant_constraints=False``: the cost gradient gets the model's truncation correction, the constraints'
-    Jacobian stays the plant's difference quotient."""
-    plant_est, correct = curved_quotients()
-    np.testing.assert_allclose(plant_est.cost, [0.5, 0.5])                 # the secant, h f''/2
-    full, _ = correct()
-    cost_only, _ = correct(constraints=False)
-    np.testing.assert_allclose(full.cost, [0.0, 0.0], atol=1e-12)
-    np.testing.assert_allclose(full.constraints, [[0.0, 0.0]], atol=1e-12)
-    np.testing.assert_allclose(cost_only.cost, [0.0, 0.0], atol=1e-12)
-    np.testing.assert_allclose(cost_only.constraints, plant_est.constraints)
-    with pytest.raises(ValueError, match="model_secant_constraints=1: expected True or False"):
-        GMASettings(model_secant_constraints=1)
-
-
-def test_secant_within_corrects_only_after_a_short_step_and_still_reaches_the_plant_optimum():
-    """``model_secant_within``: no correction at k = 0 (no previous step) nor after a step longer than the bound
-    (box widths, largest entry); the same fixed point as the correction in every iteration once steps are short.
-    The first record is the uncorrected run's to the digit."""
-    h, within = 0.5, 0.05
-    runs = {}
-    for w in (within, np.inf, None):
-        s = GMASettings(filter_gain=1.0, trust_radius=1.0, model_secant=w is not None,
-                        model_secant_within=w if w is not None else np.inf)
-        gma = GMA(model(), s, DirectionalGradient(D, step=h, reuse=False))
-        run_offline(gma, plant, 12)
-        runs[w] = gma
-    recs = runs[within].records
-    width = model().c_width
-    corrected = [any("model secant" in n for n in r.notes) for r in recs]
-    expected = [k > 0 and float(np.max(np.abs(recs[k - 1].step) / width)) <= within for k in range(len(recs))]
-    assert corrected == expected
-    assert not corrected[0] and any(corrected) and not all(corrected)
-    np.testing.assert_array_equal(recs[0].c_next, runs[None].records[0].c_next)
-    np.testing.assert_allclose(runs[within].c, plant_optimum(), atol=1e-6)
-    np.testing.assert_allclose(runs[np.inf].c, plant_optimum(), atol=1e-6)
-
-
-@pytest.mark.parametrize("bad", [0.0, -0.1, float("nan")])
-def test_secant_within_must_be_positive(bad):
-    with pytest.raises(ValueError, match="model_secant_within"):
-        GMASettings(model_secant_within=bad)
+    return plant_est, model_secant_estimate(fd, plant_est, c_k, pt(c_k), new, [], m, values)
 
 
 def test_constraints_only_keeps_the_plant_cost_quotients():
-    """``model_secant_cost=False``: the constraints' Jacobian gets the model's truncation correction, the cost
-    gradient stays the plant's difference quotient (for a model whose cost curves unlike the plant's)."""
-    plant_est, correct = curved_quotients()
-    out, note = correct(cost=False)
+    """The constraints' Jacobian gets the model's truncation correction, the cost gradient stays the plant's
+    difference quotient (for a model whose cost curves unlike the plant's)."""
+    plant_est, (out, note) = curved_quotients()
+    np.testing.assert_allclose(plant_est.cost, [0.5, 0.5])                 # the secant, h f''/2
+    np.testing.assert_allclose(plant_est.constraints, [[0.5, 0.0]])
     np.testing.assert_allclose(out.cost, plant_est.cost)
     np.testing.assert_allclose(out.constraints, [[0.0, 0.0]], atol=1e-12)
     assert "constraints only" in note
@@ -194,10 +171,9 @@ def test_the_constraint_secant_keeps_each_step_on_the_plant_constraint(secant):
     """The constraint curves in the model as in the plant (a circle; the plant adds a linear term). From (1.2, 0)
     the perturbation of 0.5 in c[0] leaves the box and is taken backwards: the plant's backward quotient
     underestimates how fast the constraint grows forward, and the second iterate oversteps it by 0.135. With the
-    model's secant on the constraint only (``model_secant_cost=False``) the quotient's error cancels, and every
-    iterate lands on the plant constraint; both end at the same point."""
-    s = GMASettings(filter_gain=1.0, trust_radius=1.0, model_secant=secant, model_secant_cost=False)
-    gma = GMA(curved_model(), s, DirectionalGradient(np.eye(2), step=0.5, reuse=False), c0=[1.2, 0.0])
+    model's secant on the constraint the quotient's error cancels, and every iterate lands on the plant constraint;
+    both end at the same point."""
+    gma = GMA(curved_model(), settings(secant), DirectionalGradient(np.eye(2), step=0.5, reuse=False), c0=[1.2, 0.0])
     hist = run_offline(gma, curved_plant, 8)
     g = [curved_plant(r.c_next).constraints[0] for r in hist.iterations]
     if secant:
@@ -206,10 +182,3 @@ def test_the_constraint_secant_keeps_each_step_on_the_plant_constraint(secant):
     else:
         assert max(g) > 0.1, g
     np.testing.assert_allclose(gma.c, [1.3218, 1.3718], atol=1e-3)
-
-
-def test_a_model_secant_correcting_nothing_is_refused():
-    with pytest.raises(ValueError, match="model_secant_cost=False and model_secant_constraints=False"):
-        GMASettings(model_secant=True, model_secant_cost=False, model_secant_constraints=False)
-    with pytest.raises(ValueError, match="model_secant_cost='no': expected True or False"):
-        GMASettings(model_secant_cost="no")

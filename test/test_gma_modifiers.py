@@ -3,7 +3,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from kite_rto.gma import GMA, Decision, GMASettings, History, ModelProblem, Modifiers, run_offline
+from kite_rto.gma import GMA, Decision, GMASettings, History, ModelProblem, Modifiers, TrustRegion, run_offline
 
 
 def test_zero_modifiers_leave_the_model_as_it_is():
@@ -50,7 +50,7 @@ def _problem():
 
 
 def test_records_carry_their_decision_through_json():
-    gma = GMA(_problem(), GMASettings(filter_gain=1.0, trust_radius=0.05, trust_radius_min=0.05))
+    gma = GMA(_problem(), GMASettings(filter_gain=1.0, trust_region=TrustRegion(radius=0.05, min_radius=0.05)))
     run_offline(gma, lambda c: ((c[0] - 1) ** 2 + 2 * (c[1] - 1) ** 2, [c[0] + c[1] - 1.5]), 2)
     first = gma.records[0]
     assert first.outcome is Decision.STEP and first.decision.startswith("step (trust region active on c[")

@@ -8,7 +8,8 @@ Noise problem: problem (a) of test_gma_convergence with Gaussian noise on cost a
 import casadi as ca
 import numpy as np
 
-from kite_rto.gma import GMA, ExperimentResult, FiniteDifferenceGradient, GMASettings, ModelProblem, run_offline
+from kite_rto.gma import (GMA, ExperimentResult, FiniteDifferenceGradient, GMASettings, ModelProblem, ModifierFilter,
+                          TrustRegion, run_offline)
 
 
 def flat_model():
@@ -33,7 +34,7 @@ def run(settings, n=30):
 
 
 def test_without_safeguards_ma_oscillates():
-    gma, steps = run(GMASettings(filter_gain=1.0, trust_radius=np.inf))
+    gma, steps = run(GMASettings(filter_gain=1.0, trust_region=None))
     assert not gma.converged
     assert sign_changes(steps[:, 0]) >= 20  # flips sign at every iteration
     assert np.max(np.abs(gma.c - 1.0)) > 1.0  # bounces between the box walls
@@ -42,18 +43,16 @@ def test_without_safeguards_ma_oscillates():
 
 
 def test_trust_region_stops_the_oscillation():
-    gma, steps = run(GMASettings(filter_gain=1.0, trust_radius=0.25, trust_radius_min=1e-4))
+    gma, steps = run(GMASettings(filter_gain=1.0, trust_region=TrustRegion(radius=0.25, min_radius=1e-4)))
     assert gma.converged
     np.testing.assert_allclose(gma.c, [1.0, 1.0], atol=1e-3)
     amplitude = np.max(np.abs(steps), axis=1)
     assert np.max(amplitude[-5:]) < 0.01 * np.max(amplitude[:5])  # the oscillation dies out
 
 
-def test_convexification_and_filter_also_converge():
-    gma, _ = run(GMASettings(filter_gain=1.0, trust_radius=np.inf, convexification=4.0))
-    assert gma.converged  # model curvature 2 + 4 = 6 = plant curvature: one step
-    np.testing.assert_allclose(gma.c, [1.0, 1.0], atol=1e-4)
-    gma, _ = run(GMASettings(filter_gain=0.3, trust_radius=np.inf), n=60)
+def test_the_input_filter_also_converges():
+    """Filter gain 0.3: c_{k+1} - c* = (1 - 0.3 - 0.3 x 2) (c_k - c*) = 0.1 (c_k - c*), a contraction."""
+    gma, _ = run(GMASettings(filter_gain=0.3, trust_region=None), n=60)
     assert gma.converged
     np.testing.assert_allclose(gma.c, [1.0, 1.0], atol=1e-3)
 
@@ -84,8 +83,8 @@ def tail_stats(settings, sigma, seed, n=40):
 
 def test_noise_neighbourhood_and_damping():
     sigma, c_opt = 1e-3, np.array([2 / 3, 5 / 6])
-    safe = GMASettings(filter_gain=0.7, trust_radius=0.25, trust_radius_min=1e-3)
-    bare = GMASettings(filter_gain=1.0, trust_radius=np.inf)
+    safe = GMASettings(filter_gain=0.7, trust_region=TrustRegion(radius=0.25, min_radius=1e-3))
+    bare = GMASettings(filter_gain=1.0, trust_region=None)
     spreads_safe, spreads_bare = [], []
     h = FiniteDifferenceGradient.from_noise(sigma, curvature=[2.0, 4.0], scheme="central").step
     # central differences: gradient error std ~ sigma / (sqrt(2) h); mapped through the smallest plant
@@ -108,7 +107,8 @@ def test_modifier_filter_averages_the_gradient_noise():
     sigma, c_opt = 3e-3, np.array([2 / 3, 5 / 6])
     errors = {}
     for b in (1.0, 0.3):
-        settings = GMASettings(filter_gain=0.7, trust_radius=0.25, trust_radius_min=1e-3, modifier_filter=b)
+        settings = GMASettings(filter_gain=0.7, trust_region=TrustRegion(radius=0.25, min_radius=1e-3),
+                               modifier_filter=None if b == 1.0 else ModifierFilter(b))
         scatter, err = [], []
         for seed in range(3):
             tail, hist = tail_stats(settings, sigma, seed)

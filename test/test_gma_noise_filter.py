@@ -1,10 +1,10 @@
-"""The modifier filter matched to the gradient noise (``GMASettings.modifier_drift``, gma/noise_filter.py):
+"""The modifier filter matched to the gradient noise (:class:`~kite_rto.gma.NoiseFilter`, gma/noise_filter.py):
 the gain recursion itself, and on a noisy closed-form plant (test_gma_noise's) that it averages the noise better
 than the fixed filter while it still follows the iterate when it moves."""
 import numpy as np
 import pytest
 
-from kite_rto.gma import GMASettings
+from kite_rto.gma import GMASettings, ModifierFilter, NoiseFilter, TrustRegion
 from kite_rto.gma.noise_filter import noise_gain
 
 from test_gma_noise import tail_stats
@@ -43,8 +43,8 @@ def test_the_noise_is_pooled_over_the_chain():
 def test_bad_input_names_the_values():
     with pytest.raises(ValueError, match="as many points"):
         noise_gain([np.zeros(2)], [], 1.0, [1.0, 1.0])
-    with pytest.raises(ValueError, match="modifier_drift=-1"):
-        GMASettings(modifier_drift=-1.0)
+    with pytest.raises(ValueError, match=r"NoiseFilter.drift=-1.0: expected every value in \[0.0, inf\]"):
+        NoiseFilter(drift=-1.0)
 
 
 def test_noise_matched_filter_averages_more_than_the_fixed_one():
@@ -52,10 +52,10 @@ def test_noise_matched_filter_averages_more_than_the_fixed_one():
     with K from noise_gain over the chain; the iterates scatter less than with the fixed filter b = 0.5 and end
     at least as close to the plant optimum."""
     sigma, c_opt = 3e-3, np.array([2 / 3, 5 / 6])
-    base = dict(filter_gain=0.7, trust_radius=0.25, trust_radius_min=1e-3)
+    base = dict(filter_gain=0.7, trust_region=TrustRegion(radius=0.25, min_radius=1e-3))
     stats = {}
-    for name, settings in (("fixed", GMASettings(modifier_filter=0.5, **base)),
-                           ("noise", GMASettings(modifier_drift=0.5, **base))):
+    for name, settings in (("fixed", GMASettings(modifier_filter=ModifierFilter(0.5), **base)),
+                           ("noise", GMASettings(noise_filter=NoiseFilter(drift=0.5), **base))):
         spread, err = [], []
         for seed in range(3):
             tail, hist = tail_stats(settings, sigma, seed)

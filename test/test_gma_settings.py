@@ -28,8 +28,8 @@ def test_defaults_are_valid_and_round_trip():
 
 def test_every_mechanism_round_trips_and_off_is_none():
     s = GMASettings(effort_schedule=(1, 2), model=ModelSettings(point="realization", ipopt_options={"tol": 1e-9}),
-                    modifier_filter=ModifierFilter(0.3), noise_filter=NoiseFilter(15.0, [20.0]),
-                    trust_region=None, safe_step=SafeStep(curvature=[20.0], tolerance=1.0), undo=Undo(1.0),
+                    modifier_filter=ModifierFilter(0.3), noise_filter=NoiseFilter(15.0, (20.0,)),
+                    trust_region=None, safe_step=SafeStep(curvature=(20.0,), tolerance=1.0), undo=Undo(1.0),
                     bound_hold=BoundHold(2.0, after=1), model_secant=ModelSecant())
     data = s.to_dict()
     assert data["trust_region"] is None and data["undo"] == {"sigma": 1.0}

@@ -1,5 +1,5 @@
-"""The measured step test (``GMASettings.reject_sigma``, issue #14 item 3): a step after which the plant's measured
-cost rose by more than ``z`` standard errors is undone, the next operating point is the previous one and the trust
+"""The measured step test (:class:`~kite_rto.gma.Undo`): a step after which the plant's measured
+cost rose by more than ``sigma`` standard errors is undone, the next operating point is the previous one and the trust
 radius shrinks in the setpoints that moved.
 
 Closed-form problem, setpoints c in [0, 2]^2: model cost |c - (1, 1)|^2; the plant's cost is four times as curved
@@ -12,7 +12,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from kite_rto.gma import GMA, ExperimentResult, FiniteDifferenceGradient, GMASettings, ModelProblem, run_offline
+from kite_rto.gma import (GMA, ExperimentResult, FiniteDifferenceGradient, GMASettings, ModelProblem, TrustRegion,
+                          Undo, run_offline)
 from kite_rto.gma.modifiers import Decision
 
 
@@ -31,15 +32,17 @@ def plant(cost_std=0.01, constraint=None):
     return fly
 
 
-def run(n_iter=4, cost_std=0.01, constraint=None, model_constraint=None, **changes):
-    s = GMASettings(filter_gain=1.0, trust_radius=0.5, trust_adapt=False, **changes)
+def run(n_iter=4, cost_std=0.01, constraint=None, model_constraint=None, undo=2.0):
+    """``undo``: ``Undo.sigma``, ``None`` for no undo."""
+    s = GMASettings(filter_gain=1.0, trust_region=TrustRegion(radius=0.5, adapt=False),
+                    undo=None if undo is None else Undo(sigma=undo))
     gma = GMA(model(model_constraint), s, FiniteDifferenceGradient(1e-3, "central"), c0=[1.0, 1.0])
     run_offline(gma, plant(cost_std, constraint), n_iter)
     return gma
 
 
 def test_a_step_the_plant_measures_as_a_loss_is_undone():
-    recs = run(reject_sigma=2.0).records
+    recs = run(undo=2.0).records
     np.testing.assert_allclose(recs[0].c_next, [1.8, 1.0], atol=1e-3)        # the model's overshoot
     assert recs[1].outcome is Decision.UNDONE
     np.testing.assert_array_equal(recs[1].c_next, recs[0].c_k)             # back to the previous point
@@ -54,22 +57,22 @@ def test_a_step_the_plant_measures_as_a_loss_is_undone():
 
 
 def test_switched_off_the_step_is_kept():
-    recs = run(reject_sigma=None).records
+    recs = run(undo=None).records
     assert all(r.outcome is not Decision.UNDONE for r in recs)
     assert not np.allclose(recs[1].c_next, recs[0].c_k)
     assert not any(n.startswith("step undone") for n in recs[1].notes)
 
 
 def test_a_rise_within_the_noise_is_kept():
-    """With a standard error of 1 the rise of 1.28 is 0.9 standard errors of the difference: below z = 2."""
-    recs = run(n_iter=2, cost_std=1.0, reject_sigma=2.0).records
+    """With a standard error of 1 the rise of 1.28 is 0.9 standard errors of the difference: below sigma = 2."""
+    recs = run(n_iter=2, cost_std=1.0, undo=2.0).records
     assert recs[1].outcome is not Decision.UNDONE
 
 
 def test_no_undo_back_to_a_point_that_broke_the_constraints():
     """The plant's constraint c_1 <= 0.9 is violated at the model optimum (the model's is c_1 <= 5): the step
     that restores feasibility stays, even though the cost rose."""
-    recs = run(n_iter=2, reject_sigma=2.0, constraint=lambda c: c[1] - 0.9, model_constraint=lambda u: u[1] - 5.0
+    recs = run(n_iter=2, undo=2.0, constraint=lambda c: c[1] - 0.9, model_constraint=lambda u: u[1] - 5.0
                ).records
     assert recs[0].constraints[0] > 0
     assert recs[1].cost > recs[0].cost + 1.0
@@ -77,13 +80,13 @@ def test_no_undo_back_to_a_point_that_broke_the_constraints():
 
 
 def test_without_standard_errors_nothing_is_undone():
-    recs = run(n_iter=2, cost_std=None, reject_sigma=0.0).records
+    recs = run(n_iter=2, cost_std=None, undo=0.0).records
     assert recs[1].outcome is not Decision.UNDONE
 
 
 def test_a_resumed_run_undoes_alike():
-    whole = run(n_iter=4, reject_sigma=2.0)
-    part = run(n_iter=2, reject_sigma=2.0)
+    whole = run(n_iter=4, undo=2.0)
+    part = run(n_iter=2, undo=2.0)
     resumed = GMA(model(), part.settings, FiniteDifferenceGradient(1e-3, "central"), history=part.history)
     run_offline(resumed, plant(), 2)
     for a, b in zip(whole.records, resumed.records):
@@ -93,6 +96,6 @@ def test_a_resumed_run_undoes_alike():
 
 
 @pytest.mark.parametrize("bad", [-1.0, float("nan")])
-def test_bad_reject_sigma_is_named(bad):
-    with pytest.raises(ValueError, match="reject_sigma="):
-        GMASettings(reject_sigma=bad)
+def test_bad_undo_sigma_is_named(bad):
+    with pytest.raises(ValueError, match=rf"Undo.sigma={bad!r}: expected every value in \[0.0, inf\]"):
+        Undo(sigma=bad)

@@ -119,15 +119,14 @@ class RealizationNLP(_WarmStarted):
 
 
 class ModifiedNLP(_WarmStarted):
-    """The modified problem of GMA, all modifiers and safeguards as parameters.
+    """The modified problem of GMA, all modifiers as parameters.
 
-    ``min_{u,s} phi(u) + lam^T d + 0.5 d^T diag(q) d + |sigma * d| + rho sum(s)``
-    ``s.t.  g(u) + eps + mu d + b - s <= 0,  max(c_lb, c_k - Delta) <= y(u) <= min(c_ub, c_k + Delta),``
-    ``h(u) = 0,  g_in(u) <= 0,  lbu <= u <= ubu,  0 <= s <= (inf if soft else 0)``, with ``d = y(u) - c_k``.
+    ``min_u phi(u) + lam^T d``
+    ``s.t.  g(u) + eps + mu d + b <= 0,  max(c_lb, c_k - Delta) <= y(u) <= min(c_ub, c_k + Delta),``
+    ``h(u) = 0,  g_in(u) <= 0,  lbu <= u <= ubu``, with ``d = y(u) - c_k``.
 
-    ``|sigma * d|`` is the Euclidean norm of the step weighted by ``sigma`` (n_c,), cost units per setpoint unit:
-    a pessimistic cost (``GMASettings.cost_sigma``), smoothed within ``delta`` cost units of ``d = 0``
-    (``sqrt(|sigma * d|^2 + delta^2) - delta``); ``sigma = 0`` leaves the cost unchanged.
+    The multipliers ``lam_g`` are those of the modified constraints (n_g), of ``y(u)`` (n_c) and of the internal
+    constraints, in this order.
     """
 
     def __init__(self, problem: ModelProblem, settings):
@@ -135,50 +134,34 @@ class ModifiedNLP(_WarmStarted):
         sym = type(pr.u).sym
         n_c, n_g = pr.n_c, pr.n_g
         c_k, eps, lam = sym("c_k", n_c), sym("eps", n_g), sym("lam", n_c)
-        mu, q, b, rho = sym("mu", n_g, n_c), sym("q", n_c), sym("b", n_g), sym("rho")
-        sigma, delta = sym("sigma", n_c), sym("delta")
-        s = sym("s", n_g)
+        mu, b = sym("mu", n_g, n_c), sym("b", n_g)
         d = pr.outputs - c_k
-        spread = ca.sqrt(ca.dot(sigma * d, sigma * d) + delta ** 2) - delta
-        f = pr.cost + ca.dot(lam, d) + 0.5 * ca.dot(q * d, d) + spread + rho * ca.sum1(s)
-        g = ca.vertcat(pr.constraints + eps + ca.mtimes(mu, d) + b - s, pr.outputs, pr.equalities,
+        f = pr.cost + ca.dot(lam, d)
+        g = ca.vertcat(pr.constraints + eps + ca.mtimes(mu, d) + b, pr.outputs, pr.equalities,
                        pr.inner_constraints)
-        p = ca.vertcat(c_k, eps, lam, ca.vec(mu), q, b, rho, sigma, delta)
+        p = ca.vertcat(c_k, eps, lam, ca.vec(mu), b)
         n_h, n_in = pr.equalities.numel(), pr.inner_constraints.numel()
         self._lbg_tail = np.r_[np.zeros(n_h), -np.inf * np.ones(n_in)]
         self._ubg_tail = np.zeros(n_h + n_in)
-        self._nlp = _TwoSolvers(f"{pr.name}_modified", {"x": ca.vertcat(pr.u, s), "p": p, "f": f, "g": g},
-                                settings, 1e-9)
+        self._nlp = _TwoSolvers(f"{pr.name}_modified", {"x": pr.u, "p": p, "f": f, "g": g}, settings, 1e-9)
 
-    def solve(self, modifiers: Modifiers, *, radius, x0, convexification=None, penalty: float | None = None,
-              spread=None) -> NLPResult:
+    def solve(self, modifiers: Modifiers, *, radius, x0) -> NLPResult:
         """Solve the modified problem around ``c_k = modifiers.c``.
 
         Args:
             modifiers: the :class:`Modifiers` (``eps``, ``lam``, ``mu`` (n_g, n_c), ``backoff``) at ``c_k``.
             radius: trust-region half-widths (n_c,), setpoint units (``inf`` = none, 0 = ``y(u) = c_k``).
-            convexification: diagonal ``q`` (n_c,) of the added cost ``0.5 d^T diag(q) d``.
-            penalty: the L1 penalty ``rho`` of soft constraints, or ``None`` for hard constraints.
             x0: cold-start guess (n_u,) (the model's realization of ``c_k``).
-            spread: ``sigma`` (n_c,) of the pessimistic cost, cost units per setpoint unit, ``>= 0``; ``None``:
-                zero (no such term).
         """
         pr, m = self.problem, modifiers
         n_g = pr.n_g
         c_k = np.asarray(m.c, float)
-        sigma = np.zeros(pr.n_c) if spread is None else np.asarray(spread, float).reshape(pr.n_c)
-        convexification = np.zeros(pr.n_c) if convexification is None else convexification
-        delta = max(1e-4 * float(np.linalg.norm(sigma * pr.c_width)), 1e-12)   # smoothing: 1e-4 box widths
-        p = np.r_[c_k, m.eps, m.lam, np.asarray(m.mu, float).reshape(n_g, pr.n_c).ravel(order="F"),
-                  convexification, m.backoff, 0.0 if penalty is None else penalty, sigma, delta]
+        p = np.r_[c_k, m.eps, m.lam, np.asarray(m.mu, float).reshape(n_g, pr.n_c).ravel(order="F"), m.backoff]
         lby = np.maximum(pr.c_lb, c_k - radius)
         uby = np.minimum(pr.c_ub, c_k + radius)
         lbg = np.r_[-np.inf * np.ones(n_g), lby, self._lbg_tail]
         ubg = np.r_[np.zeros(n_g), uby, self._ubg_tail]
-        lbx = np.r_[pr.lbu, np.zeros(n_g)]
-        ubx = np.r_[pr.ubu, (np.inf if penalty is not None else 0.0) * np.ones(n_g)]
-        x0 = np.r_[np.asarray(x0, float), np.zeros(n_g)]
-        return self._nlp.solve(x0, p, lbx, ubx, lbg, ubg)
+        return self._nlp.solve(np.asarray(x0, float), p, pr.lbu, pr.ubu, lbg, ubg)
 
 
 class NLPPair:

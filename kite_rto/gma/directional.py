@@ -266,7 +266,7 @@ def lagrangian_gradient(problem: ModelProblem, c, nu=None, settings: ModelSettin
     """``grad_c (phi_hat + nu^T g_hat)`` (n_c,) of the model's best realization of setpoints ``c``
     (``min phi s.t. y(u) = c``): the cost part from the multipliers of ``y(u) = c``, the constraint part by
     central differences of warm re-solves (step ``settings.fd_step`` of the box width), computed only
-    for nonzero multipliers ``nu`` (n_g,). Builds its own NLP: about a second for a lap OCP.
+    for nonzero multipliers ``nu`` (n_g,). Builds its own NLP.
     Raises ``RuntimeError`` if the model cannot realize ``c``."""
     settings = settings or ModelSettings()
     c = np.asarray(c, dtype=float).ravel()

@@ -4,7 +4,7 @@ A difference quotient over a step ``h`` measures the plant's *secant*, not its g
 the error is ``f'' h / 2``. With steps large enough to beat the measurement noise (half a box width on the kite)
 that error is of the size of the gradients near the optimum, and GMA's fixed point, where the modified gradient
 ``grad phi_hat + (secant_p - grad phi_hat)`` vanishes, is where the plant's *secant* vanishes: half a step from the
-plant optimum (measured on the kite: *nimble* scenario, docs/benchmarks.md).
+plant optimum.
 
 The model is cheap to evaluate at the same points. With :class:`ModelSecant` on, GMA runs the same gradient
 estimator on the model's values at the very setpoints the plant flew (the nominal point and the points the

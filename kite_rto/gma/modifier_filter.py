@@ -6,8 +6,8 @@ plant-gradient estimates over about ``2 / b - 1`` iterations (Marchetti et al. 2
 modifier's drift over the steps (:mod:`~kite_rto.gma.noise_filter`), wherever the estimates carry a standard
 deviation; elsewhere the fixed filter (or none) applies. Both set ``it.modifier_std``, the filtered cost modifier's
 standard deviation, which :mod:`~kite_rto.gma.bound_hold` compares the descent into the box with. Measured on the
-kite, whose 4-lap experiments scatter as much as the cost differences near the optimum: without a filter half the
-runs end below 99 % of the optimum; the noise-matched gain ends more runs above it than a fixed one
+kite, whose experiments scatter as much as the cost differences near the optimum: without a filter half the runs
+ended below 99 % of the optimum, and the noise-matched gain ended more runs above it than the fixed one
 (docs/history.md).
 """
 from __future__ import annotations

@@ -1,15 +1,15 @@
-"""A modifier filter matched to the gradient noise (issue #14 item 4, *reuse past points*): a scalar Kalman
-filter per setpoint on the gradient modifiers.
+"""The gain of the modifier filter matched to the gradient noise (:class:`~kite_rto.gma.NoiseFilter`): a scalar
+Kalman filter per setpoint on the gradient modifiers.
 
-The fixed filter ``lambda_k = (1 - b) lambda_{k-1} + b lambda_k^measured`` (``GMASettings.modifier_filter``)
-averages over about ``2 / b - 1`` iterations whatever the noise. With ``GMASettings.modifier_drift = q`` set,
-:class:`~kite_rto.gma.GMA` chooses the gain ``K_i`` of setpoint ``i`` each iteration from two variances:
+The fixed filter ``lambda_k = (1 - b) lambda_{k-1} + b lambda_k^measured`` (:class:`~kite_rto.gma.ModifierFilter`)
+averages over about ``2 / b - 1`` iterations whatever the noise. With a :class:`~kite_rto.gma.NoiseFilter` of drift
+bound ``q``, :class:`~kite_rto.gma.GMA` chooses the gain ``K_i`` of setpoint ``i`` each iteration from two variances:
 
 * the measurement's, ``R_i``: the mean of ``s_i^2`` over the estimates of the chain, ``s_i`` an estimate's
   standard deviation (:attr:`~kite_rto.gma.GradientEstimate.cost_std`, from the experiments' measured standard
-  errors). The pooled value, not each estimate's own: a standard error from a few laps is itself uncertain
-  (3 degrees of freedom for 4 laps), and an underestimated one would let a bad measurement in with a high gain;
-  the noise of the plant is taken as stationary;
+  errors). The pooled value, not each estimate's own: a standard error from a few samples is itself uncertain,
+  and an underestimated one would let a bad measurement in with a high gain; the plant's noise is taken as
+  stationary;
 * the filtered modifier's, ``P_i``, grown by the drift of the modifier over the last step ``d``:
   ``P_i <- P_i + (q |d / w| / w_i)^2``. The modifier is the plant-minus-model gradient, so over a step it
   changes by the plant-model curvature mismatch times the step; ``q`` bounds that mismatch, cost units per
@@ -19,7 +19,8 @@ averages over about ``2 / b - 1`` iterations whatever the noise. With ``GMASetti
 (the new measurement counts); at a converged point the steps shrink, ``P`` keeps falling and the filter
 averages ever more iterations (about ``1 / n`` after ``n`` iterations at one point): the least-squares mean of
 the history, forgetting it as fast as the iterate moves. The first estimate is taken as it is (``P = R``). The
-gradient-of-constraint modifiers ``mu[:, i]`` get the same gain (they come from the same experiments).
+gradient-of-constraint modifiers ``mu[:, i]`` get the same gain (they come from the same experiments) unless the
+constraints have a drift bound of their own.
 """
 from __future__ import annotations
 

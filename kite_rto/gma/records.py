@@ -79,7 +79,7 @@ class ExperimentRequest(_Serializable):
         c: setpoints to apply, shape (n_c,), plant setpoint units.
         purpose: ``"nominal"`` (the operating point ``c_k``) or ``"perturbation"`` (gradient estimation).
         iteration: the GMA iteration ``k`` the experiment belongs to.
-        effort: how long to measure, as a multiple of the unit the plant side defines (e.g. laps averaged):
+        effort: how long to measure, as a multiple of the unit the plant side defines (e.g. cycles averaged):
             ``GMASettings.effort_schedule`` of the iteration, ``> 0``.
     """
 
@@ -99,9 +99,9 @@ class ExperimentResult(_Serializable):
         request_id: id of the :class:`ExperimentRequest` answered.
         cost: measured plant cost ``phi_p(c)`` (scalar, minimized).
         constraints: measured plant constraints ``g_p(c)``, shape (n_g,) (``<= 0`` is feasible).
-        cost_std: optional standard deviation of ``cost`` (e.g. standard error of the mean over laps).
+        cost_std: optional standard deviation of ``cost`` (e.g. the standard error of a mean).
         constraints_std: optional standard deviations of ``constraints``, shape (n_g,).
-        extra: free, JSON-serializable data stored with the experiment (e.g. number of laps).
+        extra: free, JSON-serializable data stored with the experiment (e.g. how many cycles were averaged).
     """
 
     request_id: str

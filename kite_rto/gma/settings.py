@@ -8,8 +8,7 @@ checked when a :class:`~kite_rto.gma.GMA` is built.
 """
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field, fields, is_dataclass
+from dataclasses import dataclass, field
 from typing import Literal, get_args
 
 import numpy as np
@@ -18,6 +17,7 @@ from ._checks import Scalar, check_choice, check_int, check_range
 from .bound_hold import BoundHold
 from .model_secant import ModelSecant
 from .modifier_filter import ModifierFilter, NoiseFilter
+from .plain import from_plain, to_plain
 from .safe_step import SafeStep
 from .trust_region import TrustRegion
 from .undo import Undo
@@ -77,7 +77,7 @@ class GMASettings:
         backoff: constant tightening ``b`` of the modified constraints, ``g + eps + mu (y - c_k) + b <= 0``,
             constraint units, ``>= 0``; scalar or one per constraint.
         effort_schedule: the experiments' effort by iteration, as multipliers of a unit the plant side defines
-            (e.g. laps averaged), the last one holding for every later iteration; each ``> 0``. Empty = 1 for every
+            (e.g. cycles averaged), the last one holding for every later iteration; each ``> 0``. Empty = 1 for every
             iteration. Near the plant optimum the gradient shrinks to the noise, so later iterations may need
             longer experiments: ``(1, 2)`` measures twice as long from iteration 1 on.
         model: :class:`ModelSettings` (linearization point, finite-difference step, IPOPT options).
@@ -132,52 +132,9 @@ class GMASettings:
 
     def to_dict(self) -> dict:
         """Plain-JSON form: sub-objects as dicts (``None`` when off), sequences as lists, ``inf`` as ``"inf"``."""
-        return _plain_dataclass(self)
+        return to_plain(self)
 
     @classmethod
     def from_dict(cls, data: dict) -> "GMASettings":
         """Inverse of :meth:`to_dict`; unknown keys raise ``ValueError`` naming them."""
-        kwargs = _fields_of(cls, data)
-        if kwargs.get("model") is not None:
-            kwargs["model"] = ModelSettings(**_fields_of(ModelSettings, kwargs["model"]))
-        for name, sub in MECHANISMS.items():
-            if kwargs.get(name) is not None:
-                kwargs[name] = sub(**_fields_of(sub, kwargs[name]))
-        return cls(**kwargs)
-
-
-def _plain(v):
-    if is_dataclass(v):
-        return _plain_dataclass(v)
-    if isinstance(v, dict):
-        return {k: _plain(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple, np.ndarray)):
-        return [_plain(x) for x in np.asarray(v, dtype=float).ravel()]
-    if isinstance(v, (float, np.floating)):
-        v = float(v)
-        return ("inf" if v > 0 else "-inf") if math.isinf(v) else v
-    return v
-
-
-def _plain_dataclass(obj) -> dict:
-    return {f.name: _plain(getattr(obj, f.name)) for f in fields(obj)}
-
-
-def _back(v):
-    if isinstance(v, list):
-        return [_back(x) for x in v]
-    if v in ("inf", "-inf"):
-        return float(v)
-    return v
-
-
-def _fields_of(cls, data: dict) -> dict:
-    """``data`` as keyword arguments of ``cls``: ``ValueError`` naming unknown keys; lists and ``"inf"`` back."""
-    if not isinstance(data, dict):
-        raise ValueError(f"{cls.__name__}: expected a dict of its fields, got {data!r}")
-    known = {f.name for f in fields(cls)}
-    unknown = sorted(set(data) - known)
-    if unknown:
-        raise ValueError(f"{cls.__name__}: unknown fields {unknown} (known: {sorted(known)}); settings written by "
-                         "another version of kite_rto?")
-    return {k: v if k == "ipopt_options" or is_dataclass(v) else _back(v) for k, v in data.items()}
+        return from_plain(cls, data)

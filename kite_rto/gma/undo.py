@@ -6,8 +6,8 @@ errors of their difference, ``c_{k-1}``'s measured constraints held (``g <= 0``)
 the setpoints that moved. The gradient measured at ``c_k`` still enters the modifiers; a step back is not tested in
 turn. The standard error comes from the experiments' ``cost_std``, pooled over the run (a standard error from a
 few samples is itself uncertain; the plant's noise is taken as stationary) and scaled by each experiment's effort.
-On the kite's tuning scenarios it kept the iterate from drifting off a near-optimal point on a noisy measurement
-(docs/history.md, *undo*).
+Measured on the kite, together with longer experiments near the optimum: fewer iterates that leave a near-optimal
+point on a noisy measurement (docs/history.md).
 """
 from __future__ import annotations
 
