@@ -4,10 +4,11 @@ import numpy as np
 from kite_rto.flight.shape import ShapeBox
 from kite_rto.rto.baselines import bayes_opt_plant
 from kite_rto.rto.builder import model_only_optimum
+from kite_rto.rto.settings import KiteRTOSettings
 
 
 def test_bayes_opt_flies_its_budget_and_recommends_measured_points_in_the_box():
-    box, c0 = ShapeBox(), model_only_optimum().c
+    box, c0 = ShapeBox(), model_only_optimum(KiteRTOSettings()).c
     run = bayes_opt_plant(None, 3, c0, 450.0, box=box, init_points=1)
     assert run.flight_time >= 450.0 and run.experiments >= 4       # c0, one random point, then the GP's picks
     assert run.flight_time < 450.0 + 300.0                           # stops after the experiment that crosses it
@@ -26,5 +27,5 @@ def test_bayes_opt_stops_once_a_candidate_is_accepted():
     def stop(c):
         seen.append(c)
         return len(seen) == 2
-    run = bayes_opt_plant(None, 0, model_only_optimum().c, 5000.0, init_points=2, stop=stop)
+    run = bayes_opt_plant(None, 0, model_only_optimum(KiteRTOSettings()).c, 5000.0, init_points=2, stop=stop)
     assert run.stopped and len(run.candidates) == 2 and run.flight_time < 5000.0

@@ -18,7 +18,7 @@ C_INTERIOR = np.array([28.0, 30.0, 7.0]) * DEG
 
 @pytest.fixture(scope="module")
 def problem():
-    return model_problem()
+    return model_problem(settings=KiteOCPSettings(altitude="lap"))
 
 
 @pytest.fixture(scope="module")

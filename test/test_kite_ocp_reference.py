@@ -64,8 +64,15 @@ def test_ocp_settings_name_the_bad_value(kwargs, word):
         KiteOCPSettings(**kwargs)
 
 
-def test_rto_settings_pass_the_altitude_to_the_ocp():
-    with pytest.raises(ValueError, match="altitude = 'path'"):
-        KiteRTOSettings(altitude="path")
-    s = KiteRTOSettings(altitude="reference")
-    assert s.ocp_settings() == KiteOCPSettings(h_min=s.experiment.h_min, altitude="reference")
+def test_the_run_builds_its_ocp_with_its_own_floor():
+    """The kite's OCP is the run's: its settings' KiteOCPSettings (the reference altitude by default) and its
+    experiment's h_min, not a copy that could differ."""
+    from kite_rto.rto.builder import lap_problem
+    from kite_rto.rto.experiment import ExperimentSpec
+    with pytest.raises(ValueError, match="KiteRTOSettings.ocp = 'reference': expected a KiteOCPSettings"):
+        KiteRTOSettings(ocp="reference")
+    assert KiteRTOSettings().ocp.altitude == "reference"
+    low, high = (KiteRTOSettings(experiment=ExperimentSpec(h_min=h)) for h in (100.0, 115.0))
+    p_low, p_high = lap_problem(low), lap_problem(high)
+    g_low, g_high = (float(p.evaluate(p_low.u0)[1][0]) for p in (p_low, p_high))
+    assert g_high - g_low == pytest.approx(15.0, rel=1e-9)

@@ -79,7 +79,7 @@ def quick_settings():
 
 
 def test_deterministic_rto_improves_on_model_only_optimum(quick_settings):
-    c0 = model_only_optimum().c
+    c0 = model_only_optimum(KiteRTOSettings()).c
     quiet = PlantConfig().without_disturbances()
     res = run_rto(quiet, seed=0, n_iter=3, settings=quick_settings)
     assert res.success and not res.message and res.crashes == 0 and len(res.records) == 3

@@ -12,7 +12,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..kite.params import KiteParams
 from ..rto.baselines import bayes_opt_plant, finite_difference_ascent, model_only, nelder_mead_plant
 from ..rto.builder import model_only_optimum
 from ..rto.runner import run_rto
@@ -59,7 +58,7 @@ def start_point(settings: KiteRTOSettings) -> np.ndarray:
     experiment's h_min (as :func:`~kite_rto.rto.builder.make_gma` starts)."""
     if settings.c0 is not None:
         return np.asarray(settings.c0, dtype=float)
-    return model_only_optimum(settings.box, KiteParams(), settings.ocp_settings()).c
+    return model_only_optimum(settings).c
 
 
 def fly_gma(scenario: Scenario, seed: int, n_iter: int, settings: KiteRTOSettings) -> Flown:

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, replace
 
 from ..kite.plant import PLANT_PARAMS, PlantConfig
 from ..kite.wind_field import WindFieldSettings
+from ..rto.experiment import H_MIN
 
 __all__ = ["Scenario", "SCENARIOS", "scenario", "select_scenarios"]
 
@@ -35,7 +36,7 @@ class Scenario:
     name: str
     description: str
     plant: PlantConfig = field(default_factory=PlantConfig)
-    h_min: float = 100.0
+    h_min: float = H_MIN
     tuning: bool = False
 
 

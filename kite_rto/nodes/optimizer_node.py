@@ -224,11 +224,10 @@ class OptimizerNode(LifecycleNode):
         GMA's NLPs."""
         try:
             s = self.settings
-            ocp = s.ocp_settings()
-            for what, step in (("building the lap OCP", lambda: lap_problem(s.box, KiteParams(), ocp)),
-                               ("solving for the model's optimum", lambda: model_only_optimum(s.box, KiteParams(), ocp)),
+            for what, step in (("building the lap OCP", lambda: lap_problem(s)),
+                               ("solving for the model's optimum", lambda: model_only_optimum(s)),
                                ("computing the privileged directions", lambda: s.gradient != "directional" or
-                                gma_directions(s, KiteParams(), ocp))):
+                                gma_directions(s))):
                 if self._cancel.is_set():
                     return self._gma_ready.set()
                 self.starting = f"starting: {what}"

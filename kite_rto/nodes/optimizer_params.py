@@ -92,7 +92,7 @@ PARAMS = (
               "is as large as its noise)", 0.1, 100.0, unit="multiples of n_laps", any_length=True),
     ParamSpec("mechanisms", [n for n in MECHANISMS if getattr(_S.gma, n) is not None], "GMA's mechanisms that are "
               "on, each set by its <mechanism>.<field> parameters (docs/gma.md)", choices=tuple(MECHANISMS)),
-    ParamSpec("altitude_constraint", _S.altitude, "what the model's altitude constraint bounds: the lowest point "
+    ParamSpec("altitude_constraint", _S.ocp.altitude, "what the model's altitude constraint bounds: the lowest point "
               "of the reference figure-eight of the lap's setpoints (reference: a function of the setpoints alone, "
               "the path controller's tracking error left to GMA's modifiers) or of the model's own free lap (lap)",
               choices=ALTITUDES),
@@ -164,7 +164,8 @@ def settings_from_params(v: dict) -> KiteRTOSettings:
                        max_duration=v["max_duration"], normalize=v["normalize"], wind_source=v["wind_source"],
                        h_min=v["h_min"])
         return replace(_S, experiment=spec, box=_shape_box(v), gradient=v["gradient"],
-                       n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3, altitude=v["altitude_constraint"],
+                       n_directions=v["n_directions"], fd_step=(v["fd_step"],) * 3,
+                       ocp=replace(_S.ocp, altitude=v["altitude_constraint"]),
                        gma=_gma_settings(v))
     except ValueError as err:
         raise ParameterError(str(err)) from None

@@ -87,7 +87,7 @@ def finite_difference_ascent(config: PlantConfig | None, seed: int, c0, budget: 
     the measured constraint ``g`` > 0 adds its gradient (penalty 5 kN/m).
     """
     box = box or ShapeBox()
-    spec = spec or ExperimentSpec(n_laps=4)
+    spec = spec or ExperimentSpec()
     fl = _flight(config, seed, spec, c0)
     run = BaselineRun("FD ascent", stop=stop)
     x = np.clip(box.to_unit(c0), 0.0, 1.0)
@@ -119,7 +119,7 @@ def nelder_mead_plant(config: PlantConfig | None, seed: int, c0, budget: float,
     """SciPy Nelder–Mead on measured experiments; the candidate is the best measured point so far."""
     from scipy.optimize import minimize
     box = box or ShapeBox()
-    spec = spec or ExperimentSpec(n_laps=4)
+    spec = spec or ExperimentSpec()
     fl = _flight(config, seed, spec, c0)
     run = BaselineRun("Nelder-Mead", stop=stop)
     x0 = np.clip(box.to_unit(c0), 0.0, 1.0)
@@ -162,7 +162,7 @@ def bayes_opt_plant(config: PlantConfig | None, seed: int, c0, budget: float,
     from bayes_opt import BayesianOptimization, acquisition
     from sklearn.gaussian_process.kernels import Matern, WhiteKernel
     box = box or ShapeBox()
-    spec = spec or ExperimentSpec(n_laps=4)
+    spec = spec or ExperimentSpec()
     names = ("theta_0", "A_phi", "aspect")
     fl = _flight(config, seed, spec, c0)
     run = BaselineRun("Bayes-opt", stop=stop)

@@ -25,24 +25,33 @@ __all__ = ["lap_problem", "ModelOptimum", "model_only_optimum", "bound_activity"
 
 
 @lru_cache(maxsize=4)
-def lap_problem(box: ShapeBox = ShapeBox(), model_params: KiteParams = KiteParams(),
-                ocp: KiteOCPSettings = KiteOCPSettings()):
-    """The kite lap OCP in shape coordinates on ``box`` (cached per process: building it takes seconds)."""
+def _lap_problem(box: ShapeBox, model_params: KiteParams, ocp: KiteOCPSettings, h_min: float):
     return model_problem(model_params, ocp, c_lb=box.lower(), c_ub=box.upper(),
-                         c_guess=0.5 * (box.lower() + box.upper()), name="kite_lap", shape=True)
+                         c_guess=0.5 * (box.lower() + box.upper()), name="kite_lap", shape=True, h_min=h_min)
+
+
+def lap_problem(settings: KiteRTOSettings, model_params: KiteParams = KiteParams()):
+    """The kite lap OCP of ``settings`` in shape coordinates on its box, with its experiment's h_min (cached per
+    process: building it takes seconds)."""
+    return _lap_problem(settings.box, model_params, settings.ocp, settings.experiment.h_min)
+
+
+def _model_key(settings: KiteRTOSettings, model_params: KiteParams) -> tuple:
+    """What the model optimum depends on: the box, the model, the OCP and h_min."""
+    return settings.box, model_params, settings.ocp, settings.experiment.h_min
 
 
 @lru_cache(maxsize=4)
-def _model_optimum_cached(box, model_params, ocp) -> tuple:
+def _model_optimum_cached(box, model_params, ocp, h_min) -> tuple:
     """The model optimum's numbers (per process, and on disk: :mod:`.startup_cache`)."""
     return tuple(tuple(v) if isinstance(v, list) else v for v in
-                 cached("model-optimum", (box, model_params, ocp), lambda: _model_optimum(box, model_params, ocp),
-                        to_json=list, from_json=list))
+                 cached("model-optimum", (box, model_params, ocp, h_min),
+                        lambda: _model_optimum(box, model_params, ocp, h_min), to_json=list, from_json=list))
 
 
-def _model_optimum(box, model_params, ocp) -> tuple:
+def _model_optimum(box, model_params, ocp, h_min) -> tuple:
     from .ocp_solve import solve_model_optimum
-    pr = lap_problem(box, model_params, ocp)
+    pr = _lap_problem(box, model_params, ocp, h_min)
     sol = solve_model_optimum(pr)
     x = np.clip(sol.c, box.lower(), box.upper())
     i = pr.equalities.numel() + pr.inner_constraints.numel()
@@ -66,52 +75,42 @@ class ModelOptimum:
     min_altitude: float
 
 
-def model_only_optimum(box: ShapeBox = ShapeBox(), model_params: KiteParams = KiteParams(),
-                       ocp: KiteOCPSettings = KiteOCPSettings()) -> ModelOptimum:
-    """The :class:`ModelOptimum` in ``box`` (cached per process)."""
-    c, t, z, _, _ = _model_optimum_cached(box, model_params, ocp)
+def model_only_optimum(settings: KiteRTOSettings, model_params: KiteParams = KiteParams()) -> ModelOptimum:
+    """The :class:`ModelOptimum` of ``settings`` (its box, OCP and h_min; cached per process)."""
+    c, t, z, _, _ = _model_optimum_cached(*_model_key(settings, model_params))
     return ModelOptimum(np.array(c), t, z)
 
 
-def gma_directions(settings: KiteRTOSettings, model_params: KiteParams = KiteParams(),
-                   ocp: KiteOCPSettings = KiteOCPSettings()) -> PrivilegedDirections:
+def gma_directions(settings: KiteRTOSettings, model_params: KiteParams = KiteParams()) -> PrivilegedDirections:
     """The :class:`~kite_rto.gma.PrivilegedDirections` of ``settings`` (shape coordinates), computed at the
-    model optimum in ``settings.box`` (cached on disk by :mod:`.startup_cache`; 10.6 s to compute in
-    `benchmarks/bench_ocp.py`)."""
-    _, _, _, x_opt, nu = _model_optimum_cached(settings.box, model_params, ocp)
-    held = bound_activity(settings, model_params, ocp)
-    key = (settings.box, x_opt, nu, model_params, ocp, settings.uncertainty, settings.n_directions, held)
+    model optimum in ``settings.box`` (cached on disk by :mod:`.startup_cache`; about 10 s to compute)."""
+    _, _, _, x_opt, nu = _model_optimum_cached(*_model_key(settings, model_params))
+    held = bound_activity(settings, model_params)
+    key = (settings.box, x_opt, nu, model_params, settings.ocp, settings.experiment.h_min, settings.uncertainty,
+           settings.n_directions, held)
     return cached("directions", key, lambda: privileged_directions_for(*key), to_json=directions_to_json,
                   from_json=directions_from_json)
 
 
-def bound_activity(settings: KiteRTOSettings, model_params: KiteParams = KiteParams(),
-                   ocp: KiteOCPSettings = KiteOCPSettings()) -> tuple:
+def bound_activity(settings: KiteRTOSettings, model_params: KiteParams = KiteParams()) -> tuple:
     """Per shape coordinate -1 / 0 / +1: the box bound the model's constrained optimum keeps under every
     deviation of ``settings.uncertainty`` and the tightened altitude constraint (:func:`bound_activity_for`;
     cached on disk, about a minute to compute)."""
-    _, _, _, x_opt, _ = _model_optimum_cached(settings.box, model_params, ocp)
-    key = (settings.box, x_opt, model_params, ocp, settings.uncertainty)
+    _, _, _, x_opt, _ = _model_optimum_cached(*_model_key(settings, model_params))
+    key = (settings.box, x_opt, model_params, settings.ocp, settings.experiment.h_min, settings.uncertainty)
     return tuple(cached("bound-activity", key, lambda: [int(v) for v in bound_activity_for(*key).at_bound]))
 
 
-def make_gma(settings: KiteRTOSettings | None = None, model_params: KiteParams | None = None,
-             ocp: KiteOCPSettings | None = None, c0=None, history=None) -> GMA:
-    """A :class:`GMA` on the kite lap model in shape coordinates, started at setpoints ``c0`` (rad; default:
-    settings.c0, else the model optimum), or resumed from ``history``.
-
-    ``ocp.h_min`` must equal ``settings.experiment.h_min`` (the plant's and the model's constraint agree).
-    """
+def make_gma(settings: KiteRTOSettings | None = None, model_params: KiteParams | None = None, c0=None,
+             history=None) -> GMA:
+    """A :class:`GMA` on the kite lap model of ``settings`` in shape coordinates, started at setpoints ``c0`` (rad;
+    default: ``settings.c0``, else the model optimum), or resumed from ``history``."""
     settings = settings or KiteRTOSettings()
     model_params = model_params or KiteParams()
-    ocp = ocp or settings.ocp_settings()
-    if abs(ocp.h_min - settings.experiment.h_min) > 1e-9:
-        raise ValueError(f"make_gma: KiteOCPSettings.h_min = {ocp.h_min!r} differs from "
-                         f"ExperimentSpec.h_min = {settings.experiment.h_min!r}")
-    problem = lap_problem(settings.box, model_params, ocp)
+    problem = lap_problem(settings, model_params)
     if c0 is None:
-        c0 = settings.c0 if settings.c0 is not None else model_only_optimum(settings.box, model_params, ocp).c
+        c0 = settings.c0 if settings.c0 is not None else model_only_optimum(settings, model_params).c
     x0 = np.clip(shape_from_setpoints(c0), settings.box.lower(), settings.box.upper())
-    directions = gma_directions(settings, model_params, ocp).directions if settings.gradient == "directional" \
+    directions = gma_directions(settings, model_params).directions if settings.gradient == "directional" \
         else None
     return GMA(problem, settings.gma, settings.gradient_estimator(directions), c0=x0, history=history)

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..gma import (BoundActivity, ModelSettings, PrivilegedDirections, bound_side, lagrangian_gradient, model_optimum,
                    privileged_directions, robust_bounds)
+from .experiment import H_MIN
 from .ocp import KiteOCPSettings, model_problem
 from ..kite.params import KiteParams, ParameterError
 from ..flight.shape import ShapeBox
@@ -76,7 +77,7 @@ class ModelUncertainty:
 
 @lru_cache(maxsize=8)
 def bound_activity_for(box: ShapeBox, x0: tuple, model_params: KiteParams = KiteParams(),
-                       ocp: KiteOCPSettings = KiteOCPSettings(),
+                       ocp: KiteOCPSettings = KiteOCPSettings(), h_min: float = H_MIN,
                        uncertainty: ModelUncertainty = ModelUncertainty()) -> BoundActivity:
     """Which bounds of ``box`` the model's **constrained** optimum keeps for every deviation of ``uncertainty``
     and with the altitude constraint tightened by ``uncertainty.altitude_error``
@@ -87,7 +88,7 @@ def bound_activity_for(box: ShapeBox, x0: tuple, model_params: KiteParams = Kite
     def optimum(theta, offsets):
         params = replace(model_params, **dict(zip(names, (float(t) for t in theta))))
         problem = model_problem(params, ocp, c_lb=box.lower(), c_ub=box.upper(), c_guess=x0,
-                                name="kite_activity", shape=True)
+                                name="kite_activity", shape=True, h_min=h_min)
         return model_optimum(problem, offsets)
 
     theta0 = [float(getattr(model_params, n)) for n in names]
@@ -97,7 +98,7 @@ def bound_activity_for(box: ShapeBox, x0: tuple, model_params: KiteParams = Kite
 
 @lru_cache(maxsize=8)
 def privileged_directions_for(box: ShapeBox, x0: tuple, nu: tuple, model_params: KiteParams = KiteParams(),
-                               ocp: KiteOCPSettings = KiteOCPSettings(),
+                               ocp: KiteOCPSettings = KiteOCPSettings(), h_min: float = H_MIN,
                                uncertainty: ModelUncertainty = ModelUncertainty(),
                                n_directions: int = 2, at_bound: tuple | None = None) -> PrivilegedDirections:
     """DMA's privileged directions (shape coordinates) at the model optimum ``x0`` with constraint multipliers
@@ -113,7 +114,7 @@ def privileged_directions_for(box: ShapeBox, x0: tuple, nu: tuple, model_params:
     def gradient(theta):
         params = replace(model_params, **dict(zip(names, (float(t) for t in theta))))
         problem = model_problem(params, ocp, c_lb=box.lower(), c_ub=box.upper(), c_guess=x0,
-                                     name="kite_dma", shape=True)
+                                name="kite_dma", shape=True, h_min=h_min)
         return lagrangian_gradient(problem, x0, nu, settings)
 
     theta0 = [float(getattr(model_params, n)) for n in names]

@@ -26,8 +26,11 @@ from ..kite.params import KiteParams, check_range
 from ..kite.plant import DEFAULT_WIND_MODEL
 from .wind_source import WIND_SOURCES, make_wind_source
 
-__all__ = ["ExperimentSpec", "ExperimentOutcome", "ExperimentEvaluator", "PlantFlight", "DEFAULT_WIND_SOURCES",
+__all__ = ["H_MIN", "ExperimentSpec", "ExperimentOutcome", "ExperimentEvaluator", "PlantFlight", "DEFAULT_WIND_SOURCES",
            "default_wind_source"]
+
+H_MIN = 100.0
+"""The default minimum altitude of the kite, m (do-mpc's kite MPC: 80-120 m); every default h_min is this one."""
 
 DEFAULT_WIND_SOURCES = {"uniform": "anemometer", "field": "observer_profile"}
 """The experiment's wind source for each plant wind model (``PlantConfig.wind_model``), chosen by
@@ -66,9 +69,9 @@ class ExperimentSpec:
 
     settle_time: float = 10.0
     settle_laps: int = 1
-    n_laps: int = 3
+    n_laps: int = 4
     max_duration: float = 300.0
-    h_min: float = 100.0
+    h_min: float = H_MIN
     w_nominal: float = KiteParams().w_ref
     normalize: bool = True
     wind_source: str = default_wind_source()

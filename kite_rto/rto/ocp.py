@@ -42,6 +42,7 @@ from ..flight.shape import setpoints_from_shape, shape_from_setpoints
 from ..flight.projection import project_samples
 
 from ..gma import ModelProblem
+from .experiment import H_MIN
 
 __all__ = ["KiteOCPSettings", "KiteModelProblem", "model_problem", "path_guess", "unpack", "reference_altitudes",
            "ALTITUDES",
@@ -65,7 +66,6 @@ class KiteOCPSettings:
     Attributes:
         n_intervals: N, shooting intervals per lap (= nodes, uniform in time), >= 8.
         substeps: RK4 substeps per interval, >= 1.
-        h_min: minimum altitude, m.
         delta_max: steering bound |delta| <= delta_max (< 1 leaves the path controller some authority).
         period_bounds: (T_min, T_max), s.
         theta_bounds: (min, max) of theta at the nodes, rad.
@@ -87,7 +87,6 @@ class KiteOCPSettings:
 
     n_intervals: int = 40
     substeps: int = 2
-    h_min: float = 100.0
     delta_max: float = 0.8
     period_bounds: tuple[float, float] = (1.0, 60.0)
     theta_bounds: tuple[float, float] = (5.0 * _DEG, 75.0 * _DEG)
@@ -97,7 +96,7 @@ class KiteOCPSettings:
     constraint_unit: float = 1.0
     softmin_sharpness: float = 0.5
     delta_rate_weight: float = 0.3
-    altitude: str = "lap"
+    altitude: str = "reference"
     reference_samples: int = 64
 
     def __post_init__(self):
@@ -111,7 +110,6 @@ class KiteOCPSettings:
             raise ValueError(f"{name}.n_intervals = {self.n_intervals!r}: expected an int >= 8")
         if not isinstance(self.substeps, int) or self.substeps < 1:
             raise ValueError(f"{name}.substeps = {self.substeps!r}: expected an int >= 1")
-        check_range(name, "h_min", self.h_min, 0.0)
         check_range(name, "delta_max", self.delta_max, 0.0, 1.0, low_open=True)
         for f in ("cost_unit", "constraint_unit", "softmin_sharpness"):
             check_range(name, f, getattr(self, f), 0.0, low_open=True)
@@ -185,8 +183,8 @@ def reference_altitudes(c, r: float, n: int):
 
 
 def model_problem(params: KiteParams | None = None, settings: KiteOCPSettings | None = None,
-                       c_lb=None, c_ub=None, c_guess=None, name: str = "kite_lap",
-                       shape: bool = False) -> KiteModelProblem:
+                  c_lb=None, c_ub=None, c_guess=None, name: str = "kite_lap",
+                  shape: bool = False, h_min: float = H_MIN) -> KiteModelProblem:
     """Build the periodic-lap OCP of the open-loop kite as a :class:`ModelProblem` (all fields symbolic SX).
 
     Args:
@@ -197,6 +195,8 @@ def model_problem(params: KiteParams | None = None, settings: KiteOCPSettings | 
         name: label of the problem.
         shape: outputs in shape coordinates ``y = (theta_0, A_phi, aspect)`` (:func:`shape_from_setpoints`)
             instead of setpoints; ``c_lb``, ``c_ub`` and ``c_guess`` are then shape coordinates too (and required).
+        h_min: the minimum altitude of the constraint, m (the run's :attr:`ExperimentSpec.h_min
+            <kite_rto.rto.experiment.ExperimentSpec>`).
     """
     if shape and (c_lb is None or c_ub is None or c_guess is None):
         raise ValueError("model_problem(shape=True): give c_lb, c_ub and c_guess in shape coordinates")
@@ -222,13 +222,13 @@ def model_problem(params: KiteParams | None = None, settings: KiteOCPSettings | 
     setpoints = project_samples(theta, phi)
     z_bound = z if settings.altitude == "lap" else reference_altitudes(setpoints, params.r,
                                                                        settings.reference_samples)
-    z_soft = _softmin(z_bound, settings.h_min, settings.softmin_sharpness)
+    z_soft = _softmin(z_bound, h_min, settings.softmin_sharpness)
 
     lbu, ubu = _bounds(settings)
     return KiteModelProblem(
         u=u, cost=-mean_tension / settings.cost_unit + settings.delta_rate_weight * ca.sumsqr(
             delta - ca.vertcat(delta[1:], delta[0])),
-        constraints=(settings.h_min - z_soft) / settings.constraint_unit,
+        constraints=(h_min - z_soft) / settings.constraint_unit,
         outputs=shape_from_setpoints(setpoints) if shape else setpoints,
         lbu=lbu, ubu=ubu, c_lb=c_lb, c_ub=c_ub,
         u0=path_guess(params, settings, setpoints_from_shape(c_guess) if shape else c_guess),

@@ -76,7 +76,7 @@ def _key(config: PlantConfig, box: ShapeBox, h_min: float, spec: ExperimentSpec,
     return hashlib.sha1(text.encode()).hexdigest()[:12]
 
 
-def find_oracle(config: PlantConfig | None = None, box: ShapeBox | None = None, h_min: float = 100.0,
+def find_oracle(config: PlantConfig | None = None, box: ShapeBox | None = None, *, h_min: float,
                 spec: ExperimentSpec = _SPEC, grid: int = 3, starts: int = 2, maxfev: int = 40,
                 penalty: float = 5.0, cache_dir: str | os.PathLike | None = None, cache: bool = True
                 ) -> OracleResult:
@@ -85,6 +85,8 @@ def find_oracle(config: PlantConfig | None = None, box: ShapeBox | None = None, 
     Args:
         config: plant configuration (disturbances are switched off here).
         box: :class:`ShapeBox` searched (the optimizer's default); the result is in setpoints.
+        h_min: the run's minimum altitude, m (its :attr:`ExperimentSpec.h_min
+            <kite_rto.rto.experiment.ExperimentSpec>`; no default, so no run is judged against another's floor).
         grid: points per setpoint of the initial grid (>= 2).
         starts: Nelder–Mead runs, from the best feasible grid points.
         maxfev: evaluations per Nelder–Mead run.

@@ -16,7 +16,7 @@ from ..gma import (BoundHold, DirectionalGradient, FiniteDifferenceGradient, GMA
 from ..flight.shape import ShapeBox
 from .directions import ModelUncertainty
 from .experiment import ExperimentSpec
-from .ocp import ALTITUDES, KiteOCPSettings
+from .ocp import KiteOCPSettings
 
 __all__ = ["KiteRTOSettings", "GRADIENTS", "default_gma_settings"]
 
@@ -69,22 +69,21 @@ class KiteRTOSettings:
         uncertainty: the model-parameter deviations that define the privileged directions.
         gma: GMA's :class:`~kite_rto.gma.GMASettings` (relative to the box width; back-off in m; the effort
             schedule multiplies ``experiment.n_laps``; default :func:`default_gma_settings`).
-        altitude: what the model's altitude constraint bounds (:attr:`KiteOCPSettings.altitude
-            <kite_rto.rto.ocp.KiteOCPSettings>`): ``"lap"``, the model lap's lowest point, or ``"reference"``, the
-            lowest point of the reference figure-eight of the lap's setpoints.
+        ocp: the lap OCP's :class:`~kite_rto.rto.ocp.KiteOCPSettings` (discretization, bounds, what the altitude
+            constraint bounds); its h_min is the experiment's.
         max_repeats: times a crashed/invalid experiment is repeated before it is submitted as measured
             (NaN-free) or, with no lap at all, the run stops (>= 0).
         c0: initial setpoints (theta_0, A_phi, A_theta), rad; None = the model-only optimum.
     """
 
-    experiment: ExperimentSpec = field(default_factory=lambda: ExperimentSpec(n_laps=4))
+    experiment: ExperimentSpec = field(default_factory=ExperimentSpec)
     box: ShapeBox = field(default_factory=ShapeBox)
     gradient: str = "directional"
     fd_step: tuple = (0.5, 0.5, 0.5)
     n_directions: int = 3
     uncertainty: ModelUncertainty = field(default_factory=ModelUncertainty)
     gma: GMASettings = field(default_factory=default_gma_settings)
-    altitude: str = "reference"
+    ocp: KiteOCPSettings = field(default_factory=KiteOCPSettings)
     max_repeats: int = 3
     c0: tuple | None = None
 
@@ -99,19 +98,14 @@ class KiteRTOSettings:
             raise ValueError(f"{n}.gma = {self.gma!r}: expected a GMASettings")
         if isinstance(self.n_directions, bool) or self.n_directions not in (1, 2, 3):
             raise ValueError(f"{n}.n_directions = {self.n_directions!r}: expected 1, 2 or 3")
-        if self.altitude not in ALTITUDES:
-            raise ValueError(f"{n}.altitude = {self.altitude!r}: expected one of {ALTITUDES}")
+        if not isinstance(self.ocp, KiteOCPSettings):
+            raise ValueError(f"{n}.ocp = {self.ocp!r}: expected a KiteOCPSettings")
         if isinstance(self.max_repeats, bool) or not isinstance(self.max_repeats, int) or self.max_repeats < 0:
             raise ValueError(f"{n}.max_repeats = {self.max_repeats!r}: expected an integer >= 0")
 
     def with_gma(self, **changes) -> "KiteRTOSettings":
         """A copy with ``changes`` applied to :attr:`gma` (e.g. ``with_gma(filter_gain=0.8)``)."""
         return replace(self, gma=replace(self.gma, **changes))
-
-    def ocp_settings(self) -> KiteOCPSettings:
-        """The lap OCP's :class:`~kite_rto.rto.ocp.KiteOCPSettings`: the experiment's h_min (m) and
-        :attr:`altitude`, the rest at their defaults."""
-        return KiteOCPSettings(h_min=self.experiment.h_min, altitude=self.altitude)
 
     def experiments_per_iteration(self) -> int:
         """Nominal + perturbation experiments of one iteration (least squares: when it falls back)."""
