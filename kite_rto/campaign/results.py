@@ -12,7 +12,7 @@ import json
 import math
 from dataclasses import asdict, dataclass, fields
 
-from .judge import Verdict
+from ..rto.judge import Verdict
 
 __all__ = ["RunResult", "TABLE_COLUMNS", "write_table", "write_wall_times"]
 

@@ -16,14 +16,15 @@ import math
 
 import numpy as np
 
+from ..rto.judge import ALTITUDE_TOLERANCE_M, REACH_PERCENT
 from .methods import BASELINES, GMA
 
 __all__ = ["summarize", "CRITERIA"]
 
 MODEL_FREE = ("nelder-mead", "fd-ascent", "bayes-opt")
 CRITERIA = {
-    "final": "every run ends >= 99 % of its oracle",
-    "floor": "no iterate below h_min - 2 m",
+    "final": f"every run ends >= {REACH_PERCENT:g} % of its oracle",
+    "floor": f"no iterate below h_min - {ALTITUDE_TOLERANCE_M:g} m",
     "held": ">= 99 % held from iteration 3 on in >= 90 % of runs",
     "t99": "median flight time to 99 % <= 600 s",
     "baseline": "best model-free baseline needs >= 3x GMA's time to 99 % (median over scenarios)",
@@ -75,7 +76,7 @@ def _best_baseline(rows) -> tuple:
 
 def _criteria(gma_rows, all_rows, budget: float) -> dict:
     n = len(gma_rows)
-    final = sum(r.final_percent >= 99.0 for r in gma_rows)
+    final = sum(r.final_percent >= REACH_PERCENT for r in gma_rows)
     floor = sum(r.below_floor > 0 for r in gma_rows)
     held = sum(_held3(r) for r in gma_rows)
     med = _median([_t(r) for r in gma_rows])
@@ -105,7 +106,7 @@ def _scenario_table(rows, variant: str) -> list:
         alts = [r.lowest_altitude for r in rs]
         low = "crash" if any(a is None for a in alts) else f"{min(alts):.1f}"
         lines.append(f"| {sc} | {'yes' if rs[0].tuning else 'no'} | {rs[0].h_min:g} | {len(rs)} | {min(fin):.2f} | "
-                     f"{_median(fin):.2f} | {sum(f < 99.0 for f in fin)} | {low} | "
+                     f"{_median(fin):.2f} | {sum(f < REACH_PERCENT for f in fin)} | {low} | "
                      f"{sum(_held3(r) for r in rs)}/{len(rs)} | {_fmt_t(_median([_t(r) for r in rs]))} |")
     return lines
 
@@ -117,7 +118,7 @@ def _seed_table(rows, variant: str) -> list:
         rs = [r for r in rows if r.seed == seed and r.method == variant]
         early = sum(r.reach_index is not None and r.reach_index <= 1 for r in rs)
         lines.append(f"| {seed} | {len(rs)} | {early}/{len(rs)} | {sum(_held3(r) for r in rs)}/{len(rs)} | "
-                     f"{sum(r.final_percent < 99.0 for r in rs)} | {_fmt_t(_median([_t(r) for r in rs]))} |")
+                     f"{sum(r.final_percent < REACH_PERCENT for r in rs)} | {_fmt_t(_median([_t(r) for r in rs]))} |")
     return lines
 
 
