@@ -63,7 +63,7 @@ def gma_task(spec: RunSpec, oracle: dict) -> dict:
     flown = fly_gma(spec.scenario, spec.seed, spec.n_iter, spec.settings)
     verdict = judge(spec.scenario.plant, spec.scenario.h_min, oracle["tension_kn"], flown.iterates, flown.times)
     return RunResult.judged(spec.scenario, spec.seed, spec.method, flown, verdict, oracle["tension_kn"], None,
-                            time.perf_counter() - t0).to_dict()
+                            spec.code, time.perf_counter() - t0).to_dict()
 
 
 def baseline_budget(budget: float, gma_row: dict) -> float:
@@ -82,4 +82,4 @@ def baseline_task(spec: RunSpec, oracle: dict, gma_row: dict) -> dict:
     flown = fly_baseline(spec.method, spec.scenario, spec.seed, spec.settings, budget_s, stop)
     verdict = judge(spec.scenario.plant, spec.scenario.h_min, oracle["tension_kn"], flown.iterates, flown.times)
     return RunResult.judged(spec.scenario, spec.seed, spec.method, flown, verdict, oracle["tension_kn"], budget_s,
-                            time.perf_counter() - t0).to_dict()
+                            spec.code, time.perf_counter() - t0).to_dict()
