@@ -4,6 +4,7 @@ versions (said in the first line, counted per scenario, no criterion decided), t
 its summary names the failures and ``campaign_summary`` gives it again to the byte."""
 from contextlib import contextmanager
 from dataclasses import replace
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -207,3 +208,13 @@ def test_kite_campaign_with_a_task_that_raises_names_it_and_decides_no_criterion
     assert campaign_summary.main([str(out / "results.csv"), "--out", str(tmp_path / "again.md")]) == 1
     assert (tmp_path / "again.md").read_bytes() == (out / "summary.md").read_bytes()
 
+
+def test_every_committed_table_gives_its_committed_summary(tmp_path):
+    """benchmarks/results/<name>/ (README there): the summary recomputed from the table and its manifest is the
+    committed one to the byte, and it decides its criteria (every planned run present, one code version)."""
+    results = Path(__file__).resolve().parents[1] / "benchmarks" / "results"
+    assert (results / "README.md").is_file()
+    for table in sorted(results.glob("*/results.csv")):
+        assert manifest_path(table).is_file() and (table.parent / "summary.md").is_file(), table.parent
+        assert campaign_summary.main([str(table), "--out", str(tmp_path / "summary.md")]) == 0, table
+        assert (tmp_path / "summary.md").read_bytes() == (table.parent / "summary.md").read_bytes(), table
