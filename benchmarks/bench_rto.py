@@ -2,7 +2,7 @@
 
 GMA starts at the model-only optimum on the plant of ``--scenario`` (``kite_rto/campaign/scenarios.py``, default
 ``default``; turbulence and noise on), with that scenario's h_min. Every iterate c_k is judged by
-``kite_rto.campaign.judge.judge``: re-flown on the scenario's deterministic plant (turbulence and noise off); the
+``kite_rto.rto.judge.judge``: re-flown on the scenario's deterministic plant (turbulence and noise off); the
 target is >= 99 % of the oracle's mean tension (``kite_rto.rto.oracle.find_oracle`` on that plant and h_min, cached
 in ``$KITE_RTO_CACHE`` or the user cache directory) with min altitude >= h_min - 2 m. The baselines (model-only,
 model-free finite-difference ascent, Nelder-Mead and Bayesian optimization on the plant) get the same plant seed,
@@ -33,11 +33,11 @@ from functools import partial
 
 import numpy as np
 
-from kite_rto.campaign.judge import judge, reaches
 from kite_rto.campaign.methods import BASELINES, fly_baseline, fly_gma, scenario_settings, start_point
 from kite_rto.campaign.scenarios import SCENARIOS, scenario
 from kite_rto.rto.settings import KiteRTOSettings
 from kite_rto.rto.builder import gma_directions
+from kite_rto.rto.judge import REACH_FRACTION, judge, reaches
 from kite_rto.rto.oracle import find_oracle, plant_performance
 from kite_rto.rto.experiment import default_wind_source
 from kite_rto.rto.wind_source import WIND_SOURCES
@@ -86,7 +86,7 @@ def main(argv=None) -> int:
                        ).with_gma(backoff=args.backoff)
     settings = scenario_settings(settings, sc)
     oracle = find_oracle(config, settings.box, h_min=sc.h_min)
-    target = 0.99 * oracle.tension_kn
+    target = REACH_FRACTION * oracle.tension_kn
     c0 = start_point(settings)
     t0, z0 = plant_performance(config, c0)
     wind = (f"3-D field (IEC class {config.wind_field.turbulence_class})" if config.wind_model == "field" else
@@ -114,7 +114,7 @@ def main(argv=None) -> int:
     summary, budgets = {}, []
 
     def row(name, seed, flown):
-        v = judge(sc, oracle.tension_kn, flown.iterates, flown.times)
+        v = judge(sc.plant, sc.h_min, oracle.tension_kn, flown.iterates, flown.times)
         summary.setdefault(name, []).append((v.reach_index, v.reach_time, v.tension_kn[-1]))
         print(f"{name:12} {seed:4d} {str(v.reach_index):>7} {v.reach_time:9.0f} {_deg(flown.iterates[-1]):>16} "
               f"{v.tension_kn[-1]:8.1f} {v.percent[-1]:6.1f} {v.min_altitude[-1]:6.1f} {flown.experiments:4d} "
@@ -129,7 +129,7 @@ def main(argv=None) -> int:
         budgets.append(budget)
         for method in BASELINES:
             row(method, seed, fly_baseline(method, sc, seed, settings, budget,
-                                           stop=partial(reaches, sc, oracle.tension_kn)))
+                                           stop=partial(reaches, sc.plant, sc.h_min, oracle.tension_kn)))
     print("-" * len(head))
     print(f"{'method':12} {'reached':>8} {'median t reach s':>16} {'final % oracle: mean (min..max)':>32} "
           f"{'t reach / GMA t reach per seed':>32}")

@@ -16,6 +16,10 @@ def offset(x, base):
     return {"x": x, "z": base + x}
 
 
+def fail(x):
+    raise ValueError(f"fail: x = {x} is refused")
+
+
 def held(marker_dir, x):
     """Write ``started-<x>-<pid>-<uuid>``, wait for the file ``release`` (at most 120 s), then answer."""
     with open(os.path.join(marker_dir, f"started-{x}-{os.getpid()}-{uuid.uuid4().hex}"), "w"):

@@ -42,7 +42,7 @@ CROSSINGS = {
     "tools in nodes": ("nodes/topics.py", "from ..tools import progress", "Layers"),
     "kite in gma": ("gma/settings.py", "from ..kite import params", "gma is a generic library"),
     "a cycle inside tools": ("tools/progress.py", "from . import demo", "No import cycle"),
-    "rclpy in campaign": ("campaign/judge.py", "import rclpy", "never imports ROS 2"),
+    "rclpy in campaign": ("campaign/tasks.py", "import rclpy", "never imports ROS 2"),
     "campaign in rto": ("rto/baselines.py", "from ..campaign import scenarios", "Layers"),
     "nodes in campaign": ("campaign/summary.py", "from ..nodes import topics", "Layers"),
 }

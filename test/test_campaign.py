@@ -1,5 +1,6 @@
-"""The scenario campaign: task keys, variants, the results table and the summary's criteria (fast, no flight), and
-one slow end-to-end run of ``kite_campaign`` (one scenario, one seed, model-only and GMA with one iteration)."""
+"""The scenario campaign: task keys, variants and the results table (fast, no flight), and one slow end-to-end run of
+``kite_campaign`` (one scenario, one seed, model-only and GMA with one iteration). The summary:
+test_campaign_summary.py."""
 import csv
 import json
 import math
@@ -18,6 +19,8 @@ from kite_rto.campaign.version import check_code_version, code_version
 from kite_rto.rto.settings import KiteRTOSettings
 from kite_rto.tools import campaign as cli
 from kite_rto.tools import campaign_summary
+
+from campaign_rows import plan_of_rows, row
 
 TWO = (scenario("default"), scenario("high_floor"))
 
@@ -92,63 +95,8 @@ def test_a_worker_running_other_code_refuses_the_task():
         check_code_version("000000000000")
 
 
-def _row(sc, seed, method, final, t99, held=1, low=110.0, below=0, tuning=True, budget=None):
-    return RunResult(scenario=sc, tuning=tuning, h_min=100.0, seed=seed, method=method,
-                     reach_index=None if t99 is None else 1, t99_s=t99, held_from=held, times_s=(0.0, 300.0),
-                     percent=(90.0, final), altitude=(130.0, low), final_percent=final, lowest_altitude=low,
-                     below_floor=below, flight_time_s=3000.0, experiments=30, crashes=0, budget_s=budget,
-                     oracle_kn=600.0, message="", wall_s=12.5)
-
-
-def test_the_summary_evaluates_the_done_when_criteria_per_subset():
-    rows = [_row("a", 0, "gma", 99.5, 300.0), _row("a", 1, "gma", 99.2, 500.0, held=5),
-            _row("a", 0, "nelder-mead", 99.1, 1500.0, budget=1200.0), _row("a", 1, "nelder-mead", 95.0, None),
-            _row("b", 0, "gma", 98.0, 700.0, held=None, low=95.0, below=1, tuning=False),
-            _row("b", 1, "gma", 99.6, 900.0, tuning=False),
-            _row("b", 0, "nelder-mead", 99.3, 1400.0, tuning=False), _row("b", 1, "nelder-mead", 99.0, 1800.0,
-                                                                           tuning=False)]
-    text = summarize(rows, budget=4.0)
-    lines = {line.split(" | ")[0].lstrip("| "): line for line in text.splitlines() if line.startswith("|")}
-    assert "| a | yes | 100 | 2 | 99.20 | 99.35 | 0 | 110.0 | 1/2 | 400 |" in text
-    assert "| b | no | 100 | 2 | 98.00 | 98.80 | 1 | 95.0 | 1/2 | 800 |" in text
-    assert lines["every run ends >= 99 % of its oracle"].endswith(
-        "| 3/4 (NOT met) | 2/2 (met) | 1/2 (NOT met) |")
-    assert lines["no iterate below h_min - 2 m"].endswith(
-        "| 1/4 runs below (NOT met) | 0/2 runs below (met) | 1/2 runs below (NOT met) |")
-    assert lines[">= 99 % held from iteration 3 on in >= 90 % of runs"].endswith(
-        "| 2/4 = 50 % (NOT met) | 1/2 = 50 % (NOT met) | 1/2 = 50 % (NOT met) |")
-    assert lines["median flight time to 99 % <= 600 s"].endswith("| 600 s (met) | 400 s (met) | 800 s (NOT met) |")
-    # Nelder-Mead over GMA per seed: a 5.0 and inf (not reached): median inf; b 2.0 and 2.0: median 2.0;
-    # over scenarios: median(inf, 2.0) = inf, i.e. above the budget factor
-    assert "| median ratio over scenarios | | >4 |" in text
-    assert "| nelder-mead | 4 | 0 | 2 | 1 | 1 |" in text        # per-seed ratios 5.0, inf, 2.0, 2.0
-    assert lines["best model-free baseline needs >= 3x GMA's time to 99 % (median over scenarios)"].endswith(
-        "| nelder-mead >4 (met) | nelder-mead >4 (met) | nelder-mead 2.0 (NOT met) |")
-
-
-def test_the_summary_names_the_environment_and_flags_oracles_from_different_caches():
-    rows = [_row("a", 0, "gma", 99.5, 300.0), replace(_row("a", 1, "gma", 99.2, 500.0), oracle_kn=601.25),
-            _row("b", 0, "gma", 99.6, 900.0, tuning=False)]
-    text = summarize(rows, budget=4.0, code="0123456789ab", libraries={"numpy": "2.4.6", "hipersim": "absent"})
-    env = text.split("## Environment", 1)[1]
-    assert "- code version 0123456789ab" in env and "- numpy 2.4.6, hipersim absent" in env
-    assert "| a | 600.000, 601.250 (rows from different oracle caches) |" in env
-    assert "| b | 600.000 |" in env
-    assert "code version" not in summarize(rows, budget=4.0)
-
-
-def test_the_summary_counts_per_seed_over_the_scenarios():
-    late = replace(_row("a", 1, "gma", 99.2, 1500.0, held=3), reach_index=3)     # at 99 % from iterate 3 on
-    rows = [_row("a", 0, "gma", 99.5, 300.0), _row("b", 0, "gma", 98.0, 700.0, held=None), late,
-            _row("b", 1, "gma", 97.0, None, held=None), _row("a", 1, "nelder-mead", 99.1, 900.0, budget=1200.0)]
-    text = summarize(rows, budget=4.0)
-    assert "## gma: per seed" in text
-    assert "| 0 | 2 | 2/2 | 1/2 | 1 | 500 |" in text
-    assert "| 1 | 2 | 0/2 | 1/2 | 1 | never |" in text
-
-
 def test_the_table_holds_every_field_but_wall_time_in_campaign_order(tmp_path):
-    rows = [_row("a", 0, "gma", 99.5, 300.0), _row("a", 0, "model-only", 90.0, None, held=None, budget=1200.0)]
+    rows = [row("a", 0, "gma", 99.5, 300.0), row("a", 0, "model-only", 90.0, None, held=None, budget=1200.0)]
     rows[1] = replace(rows[1], altitude=(None,), lowest_altitude=None, percent=(0.0,), times_s=(0.0,))
     assert RunResult.from_dict(json.loads(json.dumps(rows[1].to_dict()))) == rows[1]
     write_table(tmp_path / "t.csv", rows)
@@ -157,39 +105,31 @@ def test_the_table_holds_every_field_but_wall_time_in_campaign_order(tmp_path):
     assert [r["method"] for r in table] == ["gma", "model-only"]
     assert json.loads(table[0]["percent"]) == [90.0, 99.5] and table[0]["budget_s"] == ""
     assert json.loads(table[1]["altitude"]) == [None] and table[1]["lowest_altitude"] == ""
+    assert table[0]["code_version"] == "0123456789ab"                 # each row names the code it was computed with
 
 
 def test_a_table_reads_back_as_the_rows_it_was_written_from(tmp_path):
-    crash = replace(_row("a", 0, "model-only", 90.0, None, held=None, budget=1200.0), altitude=(None,),
+    crash = replace(row("a", 0, "model-only", 90.0, None, held=None, budget=1200.0), altitude=(None,),
                     lowest_altitude=None, percent=(0.0,), times_s=(0.0,), message="stopped: no lap")
-    rows = [_row("a", 0, "gma", 99.5, 300.0), crash, _row("b", 3, "gma", 98.25, None, held=None, tuning=False)]
+    rows = [row("a", 0, "gma", 99.5, 300.0), crash, row("b", 3, "gma", 98.25, None, held=None, tuning=False)]
     write_table(tmp_path / "t.csv", rows)
     back = read_table(tmp_path / "t.csv")
     assert all(math.isnan(r.wall_s) for r in back)
     assert [replace(r, wall_s=w.wall_s) for r, w in zip(back, rows)] == rows
-    assert summarize(back, budget=4.0) == summarize(rows, budget=4.0)
+    assert summarize(back, plan_of_rows(rows)) == summarize(rows, plan_of_rows(rows))
     text = (tmp_path / "t.csv").read_text().replace(",98.25,", ",98.x,")
     (tmp_path / "bad.csv").write_text(text)
     with pytest.raises(ValueError, match=r"bad.csv, line 4, column final_percent = '98.x'"):
         read_table(tmp_path / "bad.csv")
     (tmp_path / "cols.csv").write_text("scenario,seed\na,0\n")
-    with pytest.raises(ValueError, match="columns"):
+    with pytest.raises(ValueError, match="columns") as refused:
         read_table(tmp_path / "cols.csv")
-
-
-def test_campaign_summary_merges_tables_and_refuses_a_run_in_two(tmp_path, capsys):
-    write_table(tmp_path / "a.csv", [_row("a", 0, "gma", 99.5, 300.0), _row("a", 0, "bayes-opt", 99.1, 600.0)])
-    write_table(tmp_path / "b.csv", [_row("a", 1, "gma", 99.2, 500.0), _row("a", 1, "bayes-opt", 98.0, None)])
-    assert campaign_summary.main([str(tmp_path / "a.csv"), str(tmp_path / "b.csv"), "--out",
-                                  str(tmp_path / "s.md")]) == 0
-    text = (tmp_path / "s.md").read_text()
-    assert "| a | yes | 100 | 2 | 99.20 | 99.35 | 0 | 110.0 | 2/2 | 400 |" in text
-    assert "| bayes-opt | 2 | 0 | 1 | 0 | 1 |" in text             # per-seed ratios 600 / 300 = 2 and not reached
-    capsys.readouterr()
-    assert campaign_summary.main([str(tmp_path / "a.csv"), str(tmp_path / "a.csv")]) == 2
-    err = capsys.readouterr().err
-    assert "scenario 'a', seed 0, method 'gma' is in both" in err and "a.csv" in err
-    assert campaign_summary.main([str(tmp_path / "missing.csv")]) == 2
+    assert "without code_version" not in str(refused.value)
+    with open(tmp_path / "t.csv") as f:                                  # a table from before the code_version column
+        old = [",".join(line.rstrip("\n").split(",")[:-1]) for line in f]
+    (tmp_path / "old.csv").write_text("\n".join(old) + "\n")
+    with pytest.raises(ValueError, match="without code_version it cannot name the code"):
+        read_table(tmp_path / "old.csv")
 
 
 @pytest.mark.slow
@@ -198,7 +138,7 @@ def test_kite_campaign_end_to_end_and_from_its_cache(tmp_path, capsys):
             "1", "--cache-dir", str(tmp_path / "cache"), "--no-progress"]
     assert cli.main(args + ["--out", str(tmp_path / "one")]) == 0
     first = capsys.readouterr().out
-    assert "2 results (3 tasks run now), 0 failed" in first
+    assert "2 of 2 planned results (3 tasks run now), 0 tasks failed (0 of the table's runs)" in first
     table = list(csv.DictReader(open(tmp_path / "one" / "results.csv")))
     assert [(r["scenario"], r["seed"], r["method"]) for r in table] == [("default", "0", "gma"),
                                                                           ("default", "0", "model-only")]
@@ -208,10 +148,17 @@ def test_kite_campaign_end_to_end_and_from_its_cache(tmp_path, capsys):
     assert json.loads(gma["percent"])[0] == json.loads(mo["percent"])[0]         # both start at the model optimum
     assert float(mo["budget_s"]) == 4.0 * (float(gma["t99_s"]) if gma["t99_s"] else float(gma["flight_time_s"]))
     assert math.isclose(float(gma["final_percent"]), json.loads(gma["percent"])[-1])
+    assert {r["code_version"] for r in table} == {code_version()}
     for name in ("summary.md", "campaign.png", "wall.csv"):
         assert (tmp_path / "one" / name).stat().st_size > 0
+    summary = (tmp_path / "one" / "summary.md").read_text()
+    assert summary.startswith(f"# Scenario campaign: 1 scenarios x 1 seeds, methods gma, model-only; all 2 planned "
+                              f"runs present, code version {code_version()}\n")
+    assert campaign_summary.main([str(tmp_path / "one" / "results.csv"), "--out", str(tmp_path / "again.md")]) == 0
+    assert (tmp_path / "again.md").read_bytes() == (tmp_path / "one" / "summary.md").read_bytes()
     assert sorted(p.name for p in (tmp_path / "cache").iterdir()) == sorted(
         f"{t.key}.json" for t in cli.build_campaign(cli._parser().parse_args(args)).tasks() if t.store)
     assert cli.main(args + ["--out", str(tmp_path / "two")]) == 0
-    assert "2 results (0 tasks run now), 0 failed" in capsys.readouterr().out
-    assert (tmp_path / "two" / "results.csv").read_bytes() == (tmp_path / "one" / "results.csv").read_bytes()
+    assert "2 of 2 planned results (0 tasks run now), 0 tasks failed" in capsys.readouterr().out
+    for name in ("results.csv", "results.manifest.json", "summary.md"):
+        assert (tmp_path / "two" / name).read_bytes() == (tmp_path / "one" / name).read_bytes()

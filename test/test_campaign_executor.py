@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from distributed import Client, LocalCluster
 
-from campaign_tasks import closed_form_tasks, expected, held
+from campaign_tasks import closed_form_tasks, expected, fail, held, square
 from kite_rto.campaign.executor import ResultCache, Task, execute, pending
 from kite_rto.tools import graph
 
@@ -97,6 +97,18 @@ def test_a_second_run_submits_nothing(tmp_path, local_client):
     assert second.submitted == [] and sorted(second.cached) == sorted(expected())
     assert second.results == first.results
     assert _cache_files(tmp_path / "cache") == files
+
+
+def test_a_task_that_raises_fails_with_its_dependents_and_the_bar_counts_only_what_finished(tmp_path, local_client,
+                                                                                           capsys):
+    tasks = [Task("sq-0", square, (0,)), Task("sq-1", square, (1,)), Task("boom", fail, (7,)),
+             Task("after", square, (2,), deps=("boom",))]
+    run = execute(tasks, ResultCache(tmp_path), local_client, retries=0, progress=True)
+    assert run.results == {"sq-0": {"x": 0, "y": 0}, "sq-1": {"x": 1, "y": 1}}
+    assert run.failed == {"boom": "ValueError: fail: x = 7 is refused", "after": "ValueError: fail: x = 7 is refused"}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sq-0.json", "sq-1.json"]
+    final = capsys.readouterr().err.replace("\r", "\n").strip().splitlines()[-1]
+    assert "tasks finished" in final and "2/4" in final and "failed=2" in final, final      # not 4/4
 
 
 def test_separate_scheduler_and_worker_processes_give_the_local_cluster_s_results(tmp_path, local_client,

@@ -133,7 +133,9 @@ def pending(tasks, cache: ResultCache) -> tuple:
 
 def execute(tasks, cache: ResultCache, client=None, retries: int = 2, progress: bool = True) -> Execution:
     """Run ``tasks`` (dependencies first) on ``client`` (a ``distributed.Client``; may be None when everything
-    is cached) and return the :class:`Execution`; the progress bar (tqdm) goes to stderr."""
+    is cached) and return the :class:`Execution`. The progress bar (tqdm, on stderr) counts the submitted tasks
+    that finished, out of all submitted, and shows how many failed beside it (``failed=N``): a bar that ends short
+    of its total says that tasks failed."""
     from distributed import as_completed
     from tqdm import tqdm
     to_run, cached = pending(tasks, cache)
@@ -148,19 +150,22 @@ def execute(tasks, cache: ResultCache, client=None, retries: int = 2, progress: 
         fut = client.submit(t.fn, *t.args, *inputs, key=t.key, retries=retries, pure=False)
         futures[t.key], owner[fut.key] = fut, t
         run.submitted.append(t.key)
-    with tqdm(total=len(futures), desc="tasks", unit="task", disable=not progress, dynamic_ncols=True) as bar:
+    with tqdm(total=len(futures), desc="tasks finished", unit="task", disable=not progress,
+              dynamic_ncols=True) as bar:
+        bar.set_postfix(failed=0)
         for fut in as_completed(list(futures.values())):
             t = owner[fut.key]
-            bar.update(1)
             if t.key in run.results or t.key in run.failed or t.key in run.transient:
                 continue                          # a future is reported once; guard against a repeat anyway
             try:
                 value = fut.result()
             except Exception as exc:              # noqa: BLE001 - the task's own error, reported per key
                 run.failed[t.key] = f"{type(exc).__name__}: {exc}"
+                bar.set_postfix(failed=len(run.failed))
                 continue
             if t.store:
                 run.results[t.key] = cache.put(t.key, value)
             else:
                 run.transient[t.key] = value
+            bar.update(1)
     return run

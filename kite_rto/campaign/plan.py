@@ -15,12 +15,13 @@ from dataclasses import dataclass, field, replace
 
 from ..rto.settings import KiteRTOSettings
 from .executor import Execution, ResultCache, Task, execute
+from .manifest import Manifest
 from .methods import BASELINES, GMA, METHODS, scenario_settings
 from .results import RunResult
 from .tasks import RunSpec, baseline_task, gma_task, oracle_task
 from .version import code_version
 
-__all__ = ["Campaign", "CampaignRun", "run_campaign"]
+__all__ = ["Campaign", "CampaignRun", "run_campaign", "campaign_manifest"]
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.]*$")
 
@@ -77,6 +78,12 @@ class Campaign:
         if len({s.name for s in self.scenarios}) != len(self.scenarios) or len(set(self.seeds)) != len(self.seeds):
             raise ValueError(f"{n}: scenarios and seeds must not repeat")
 
+    def table_methods(self) -> tuple:
+        """The method names of the table's rows, in row order: every GMA variant if ``gma`` is among the methods,
+        then the baselines among them."""
+        variants = tuple(v for v, _ in self.variants) if GMA in self.methods else ()
+        return variants + tuple(m for m in BASELINES if m in self.methods)
+
     def _gma_spec(self, scenario, seed, name) -> RunSpec:
         settings = scenario_settings(dict(self.variants)[name], scenario)
         return RunSpec(scenario, int(seed), name, settings, self.n_iter, self.budget, self.code)
@@ -111,10 +118,12 @@ class Campaign:
 @dataclass
 class CampaignRun:
     """A campaign's outcome: ``results`` (:class:`RunResult` in campaign order: scenario, seed, GMA variants,
-    baselines), ``failed`` (task key -> error) and the executor's :class:`Execution`."""
+    baselines), ``failed`` (task key -> error), ``failed_runs`` (``(scenario, seed, method, error)`` of the table's
+    runs among them, in campaign order) and the executor's :class:`Execution`."""
 
     results: list
     failed: dict
+    failed_runs: tuple
     execution: Execution
 
 
@@ -125,10 +134,22 @@ def run_campaign(campaign: Campaign, cache: ResultCache, client=None, retries: i
     tasks = campaign.tasks()
     ex = execute(tasks, cache, client, retries=retries, progress=progress)
     tuning = {s.name: s.tuning for s in campaign.scenarios}
-    results = []
+    in_table = set(campaign.table_methods())
+    results, failed = [], []
     for t in tasks:
         if t.store and t.key in ex.results:
             r = RunResult.from_dict(ex.results[t.key])
-            if r.method in BASELINES or GMA in campaign.methods:
+            if r.method in in_table:
                 results.append(replace(r, tuning=tuning[r.scenario]))
-    return CampaignRun(results=results, failed=dict(ex.failed), execution=ex)
+        elif t.store and t.key in ex.failed and t.args[0].method in in_table:
+            spec = t.args[0]
+            failed.append((spec.scenario.name, spec.seed, spec.method, ex.failed[t.key]))
+    return CampaignRun(results=results, failed=dict(ex.failed), failed_runs=tuple(failed), execution=ex)
+
+
+def campaign_manifest(campaign: Campaign, run: CampaignRun, libraries: dict) -> Manifest:
+    """The :class:`~kite_rto.campaign.manifest.Manifest` of ``campaign`` after ``run``, with the client's
+    ``libraries`` (name -> version)."""
+    return Manifest(scenarios=tuple(s.name for s in campaign.scenarios), seeds=tuple(int(s) for s in campaign.seeds),
+                    methods=campaign.table_methods(), n_iter=campaign.n_iter, budget=float(campaign.budget),
+                    code_version=campaign.code, libraries=dict(libraries), failed=run.failed_runs)

@@ -1,7 +1,8 @@
 """One campaign result per scenario x seed x method (:class:`RunResult`) and the results table (:func:`write_table`).
 
 The table is sorted by the campaign's order (scenario, seed, method) and holds no wall time, so two runs of the
-same campaign give the same bytes; wall seconds go to a separate file (:func:`write_wall_times`). Floats are
+same campaign give the same bytes; each row names the code version its run was computed with (a cached run keeps
+its own); wall seconds go to a separate file (:func:`write_wall_times`). Floats are
 rounded (percentages to 1e-3, metres and seconds to 1e-2) and lists are JSON-encoded in their cells. A judged
 crash has no altitude: None in the lists, an empty cell.
 """
@@ -12,7 +13,7 @@ import json
 import math
 from dataclasses import asdict, dataclass, fields
 
-from .judge import Verdict
+from ..rto.judge import Verdict
 
 __all__ = ["RunResult", "TABLE_COLUMNS", "write_table", "write_wall_times"]
 
@@ -43,6 +44,7 @@ class RunResult:
         budget_s: a baseline's flight-time budget, s (None for GMA).
         oracle_kn: the scenario's oracle mean tension, kN.
         message: why the run stopped early ("" if it did not).
+        code_version: the :func:`~kite_rto.campaign.version.code_version` the run was computed with.
         wall_s: wall time of the run on its worker, s (not in the table).
     """
 
@@ -66,13 +68,14 @@ class RunResult:
     budget_s: float | None
     oracle_kn: float
     message: str
+    code_version: str
     wall_s: float
 
     @classmethod
     def judged(cls, scenario, seed: int, method: str, flown, verdict: Verdict, oracle_kn: float,
-               budget_s: float | None, wall_s: float) -> "RunResult":
+               budget_s: float | None, code: str, wall_s: float) -> "RunResult":
         """The result of ``flown`` (:class:`~kite_rto.campaign.methods.Flown`) on ``scenario`` given its
-        :class:`Verdict`."""
+        :class:`Verdict`, computed with code version ``code``."""
         return cls(scenario=scenario.name, tuning=scenario.tuning, h_min=float(scenario.h_min), seed=int(seed),
                    method=method, reach_index=verdict.reach_index,
                    t99_s=_r(verdict.reach_time, 2), held_from=verdict.held_from,
@@ -82,7 +85,7 @@ class RunResult:
                    below_floor=int(verdict.below_floor), flight_time_s=_r(flown.flight_time, 2),
                    experiments=int(flown.experiments), crashes=int(flown.crashes),
                    budget_s=_r(budget_s, 2), oracle_kn=_r(oracle_kn, 3),
-                   message=flown.message, wall_s=round(float(wall_s), 2))
+                   message=flown.message, code_version=code, wall_s=round(float(wall_s), 2))
 
     def to_dict(self) -> dict:
         """Plain JSON-serializable values (tuples as lists)."""

@@ -1,9 +1,13 @@
-"""The campaign's summary in markdown (:func:`summarize`): per scenario and GMA variant, per seed (a seed is the same
-turbulence box in every scenario with the same Mann length scale and anisotropy, so outcomes correlate by seed),
-then issue 14's done-when criteria over all runs and over the tuning and report subsets, then the baselines' time to
-99 % over GMA's, and last the environment: the code version, the numerical libraries and each scenario's oracle
-(its cache is rebuilt per environment, and a criterion decided by a run near 99 % can move with it; a scenario
-whose rows carry more than one oracle value was merged from different caches).
+"""The campaign's summary in markdown (:func:`summarize`) of a table's rows and the :class:`~.manifest.Plan` they
+belong to. Its first line says whether every planned run is present and computed with one code version; if not (a
+run failed, is missing, or rows of several code versions are mixed) it says so, a section counts the absent runs per
+scenario and names them, and no criterion is marked met or not met. Then per scenario and GMA variant, per seed (a
+seed is the same turbulence box in every scenario with the same Mann length scale and anisotropy, so outcomes
+correlate by seed), then issue 14's done-when criteria over all runs and over the tuning and report subsets, then
+the baselines' time to 99 % over GMA's, and last the environment: the plan, the code versions with their rows and
+numerical libraries, and each scenario's oracle (its cache is rebuilt per environment, and a criterion decided by a
+run near 99 % can move with it; a scenario whose rows carry more than one oracle value was merged from different
+caches).
 
 Times to 99 % of runs that never reach it count as infinite in medians ("never" when the median is). A baseline's
 per-seed ratio is its time to 99 % over the reference GMA run's on the same seed (seeds where GMA did not reach
@@ -16,14 +20,16 @@ import math
 
 import numpy as np
 
+from ..rto.judge import ALTITUDE_TOLERANCE_M, REACH_PERCENT
+from .manifest import Plan
 from .methods import BASELINES, GMA
 
-__all__ = ["summarize", "CRITERIA"]
+__all__ = ["summarize", "decided", "CRITERIA"]
 
 MODEL_FREE = ("nelder-mead", "fd-ascent", "bayes-opt")
 CRITERIA = {
-    "final": "every run ends >= 99 % of its oracle",
-    "floor": "no iterate below h_min - 2 m",
+    "final": f"every run ends >= {REACH_PERCENT:g} % of its oracle",
+    "floor": f"no iterate below h_min - {ALTITUDE_TOLERANCE_M:g} m",
     "held": ">= 99 % held from iteration 3 on in >= 90 % of runs",
     "t99": "median flight time to 99 % <= 600 s",
     "baseline": "best model-free baseline needs >= 3x GMA's time to 99 % (median over scenarios)",
@@ -75,7 +81,7 @@ def _best_baseline(rows) -> tuple:
 
 def _criteria(gma_rows, all_rows, budget: float) -> dict:
     n = len(gma_rows)
-    final = sum(r.final_percent >= 99.0 for r in gma_rows)
+    final = sum(r.final_percent >= REACH_PERCENT for r in gma_rows)
     floor = sum(r.below_floor > 0 for r in gma_rows)
     held = sum(_held3(r) for r in gma_rows)
     med = _median([_t(r) for r in gma_rows])
@@ -90,8 +96,10 @@ def _criteria(gma_rows, all_rows, budget: float) -> dict:
     }
 
 
-def _verdict(value: str, met) -> str:
-    return value if met is None else f"{value} ({'met' if met else 'NOT met'})"
+def _verdict(value: str, met, complete: bool) -> str:
+    if met is None:
+        return value
+    return f"{value} ({'met' if met else 'NOT met'})" if complete else f"{value} (not decided)"
 
 
 def _scenario_table(rows, variant: str) -> list:
@@ -105,7 +113,7 @@ def _scenario_table(rows, variant: str) -> list:
         alts = [r.lowest_altitude for r in rs]
         low = "crash" if any(a is None for a in alts) else f"{min(alts):.1f}"
         lines.append(f"| {sc} | {'yes' if rs[0].tuning else 'no'} | {rs[0].h_min:g} | {len(rs)} | {min(fin):.2f} | "
-                     f"{_median(fin):.2f} | {sum(f < 99.0 for f in fin)} | {low} | "
+                     f"{_median(fin):.2f} | {sum(f < REACH_PERCENT for f in fin)} | {low} | "
                      f"{sum(_held3(r) for r in rs)}/{len(rs)} | {_fmt_t(_median([_t(r) for r in rs]))} |")
     return lines
 
@@ -117,7 +125,7 @@ def _seed_table(rows, variant: str) -> list:
         rs = [r for r in rows if r.seed == seed and r.method == variant]
         early = sum(r.reach_index is not None and r.reach_index <= 1 for r in rs)
         lines.append(f"| {seed} | {len(rs)} | {early}/{len(rs)} | {sum(_held3(r) for r in rs)}/{len(rs)} | "
-                     f"{sum(r.final_percent < 99.0 for r in rs)} | {_fmt_t(_median([_t(r) for r in rs]))} |")
+                     f"{sum(r.final_percent < REACH_PERCENT for r in rs)} | {_fmt_t(_median([_t(r) for r in rs]))} |")
     return lines
 
 
@@ -147,12 +155,32 @@ def _baseline_table(rows, budget: float) -> list:
     return lines
 
 
-def _environment(rows, code: str | None, libraries: dict | None) -> list:
-    lines = []
-    if code is not None:
-        lines.append(f"- code version {code}")
-    if libraries:
-        lines.append("- " + ", ".join(f"{k} {v}" for k, v in libraries.items()))
+def _missing(rows, plan: Plan) -> list:
+    """The planned runs neither in ``rows`` nor recorded as failed, in plan order."""
+    present = {(r.scenario, r.seed, r.method) for r in rows}
+    return [run for run in plan.runs if run not in present and run not in plan.failed]
+
+
+def decided(rows, plan: Plan) -> bool:
+    """True if the summary of ``rows`` decides its criteria: every run ``plan`` planned is in ``rows`` and all
+    were computed with one code version."""
+    return not plan.failed and not _missing(rows, plan) and len(_versions(rows, plan)) == 1
+
+
+def _versions(rows, plan: Plan) -> dict:
+    """Code version -> rows computed with it: the rows' versions in order, then the manifests' without rows."""
+    out = {}
+    for r in rows:
+        out[r.code_version] = out.get(r.code_version, 0) + 1
+    return {**out, **{v: 0 for v in plan.versions if v not in out}}
+
+
+def _environment(rows, plan: Plan, versions: dict) -> list:
+    lines = [f"- plan: {plan.n_iter} GMA iterations, the baselines' budget {plan.budget:g}x GMA's time to 99 %"]
+    for v, n in versions.items():
+        libraries = plan.versions.get(v)
+        lines.append(f"- code version {v}: {n} runs; " + (", ".join(f"{k} {x}" for k, x in libraries.items())
+                                                         if libraries else "libraries not in any manifest"))
     lines += ["", "| scenario | oracle kN |", "|---|---|"]
     for sc in dict.fromkeys(r.scenario for r in rows):
         values = sorted({r.oracle_kn for r in rows if r.scenario == sc})
@@ -161,14 +189,59 @@ def _environment(rows, code: str | None, libraries: dict | None) -> list:
     return lines
 
 
-def summarize(rows, budget: float, code: str | None = None, libraries: dict | None = None) -> str:
-    """The markdown summary of ``rows`` (:class:`~kite_rto.campaign.results.RunResult`, campaign order);
-    ``budget``: the baselines' budget factor; ``code``, ``libraries``: the code version and library versions
-    (name -> version) named in its *Environment* section (left out when None)."""
+def _headline(plan: Plan, versions: dict, missing: list) -> str:
+    """The first line: the planned grid, its absent runs and code versions, and, unless every planned run is
+    present and all were computed with one code version, that no criterion is decided."""
+    n_failed = len(plan.failed)
+    grid = (f"{len(dict.fromkeys(sc for sc, _, _ in plan.runs))} scenarios x "
+            f"{len(dict.fromkeys(s for _, s, _ in plan.runs))} seeds, methods "
+            f"{', '.join(dict.fromkeys(m for _, _, m in plan.runs))}")
+    problems, details = [], []
+    if n_failed or missing:
+        problems.append("INCOMPLETE")
+        details.append(f"{n_failed} of {len(plan.runs)} planned runs failed, {len(missing)} missing")
+    if len(versions) > 1:
+        problems.append("MIXED CODE VERSIONS")
+        details.append("code versions " + ", ".join(f"{v} ({n} runs)" for v, n in versions.items()))
+    if not problems:
+        return (f"# Scenario campaign: {grid}; all {len(plan.runs)} planned runs present, code version "
+                f"{next(iter(versions))}")
+    version = "" if len(versions) > 1 else f"; code version {next(iter(versions))}"
+    return (f"# Scenario campaign {' and '.join(problems)}, no criterion decided: {'; '.join(details)}; "
+            f"{grid}{version}")
+
+
+def _absent(plan: Plan, missing: list) -> list:
+    """The failed and missing runs, counted per scenario, then each named (an error's first line)."""
+    lines = ["| scenario | planned | present | failed | missing |", "|---|---|---|---|---|"]
+    absent = [*plan.failed, *missing]
+    for sc in dict.fromkeys(sc for sc, _, _ in absent):
+        planned = sum(run[0] == sc for run in plan.runs)
+        failed = sum(run[0] == sc for run in plan.failed)
+        gone = sum(run[0] == sc for run in missing)
+        lines.append(f"| {sc} | {planned} | {planned - failed - gone} | {failed} | {gone} |")
+    lines.append("")
+    for run in plan.runs:
+        if run in plan.failed:
+            error = (plan.failed[run].splitlines() or [""])[0]
+            lines.append(f"- {run[0]} seed {run[1]} {run[2]}: failed: "
+                         f"{error if len(error) <= 200 else error[:200] + ' ...'}")
+        elif run in missing:
+            lines.append(f"- {run[0]} seed {run[1]} {run[2]}: missing (not in the table, no failure recorded)")
+    return lines
+
+
+def summarize(rows, plan: Plan) -> str:
+    """The markdown summary of ``rows`` (:class:`~kite_rto.campaign.results.RunResult`, campaign order) of the
+    runs ``plan`` (:func:`~kite_rto.campaign.manifest.plan_of` their manifests) planned. Raises ValueError naming a
+    row that is not a planned run or was recorded as failed."""
+    plan.check(rows)
+    missing, versions, complete = _missing(rows, plan), _versions(rows, plan), decided(rows, plan)
+    budget = plan.budget
     variants = list(dict.fromkeys(r.method for r in rows if r.method not in BASELINES))
-    seeds = sorted({r.seed for r in rows})
-    out = [f"# Scenario campaign: {len(dict.fromkeys(r.scenario for r in rows))} scenarios x {len(seeds)} seeds, "
-           f"methods {', '.join(dict.fromkeys(r.method for r in rows))}", ""]
+    out = [_headline(plan, versions, missing), ""]
+    if plan.failed or missing:
+        out += ["## Failed or missing runs", ""] + _absent(plan, missing) + [""]
     for v in variants:
         out += [f"## {v}: per scenario", ""] + _scenario_table(rows, v) + [""]
         out += [f"## {v}: per seed (the same turbulence in most scenarios)", ""] + _seed_table(rows, v) + [""]
@@ -180,9 +253,9 @@ def summarize(rows, budget: float, code: str | None = None, libraries: dict | No
         for c, text in CRITERIA.items():
             if c == "baseline" and v != GMA:
                 continue
-            out.append(f"| {text} | " + " | ".join(_verdict(*cols[k][c]) if any(r.method == v and subsets[k](r)
-                                                                                  for r in rows) else "-"
-                                                   for k in subsets) + " |")
+            cells = [_verdict(*cols[k][c], complete) if any(r.method == v and f(r) for r in rows) else "-"
+                     for k, f in subsets.items()]
+            out.append(f"| {text} | " + " | ".join(cells) + " |")
         out.append("")
     base = _baseline_table(rows, budget)
     if base:
@@ -197,5 +270,5 @@ def summarize(rows, budget: float, code: str | None = None, libraries: dict | No
             rel = "-" if not (math.isfinite(m) and math.isfinite(g) and g > 0) else f"{100 * (m / g - 1):+.0f} %"
             out.append(f"- {v}: median t99 {_fmt_t(m)} s vs {_fmt_t(g)} s: {rel}")
         out.append("")
-    out += ["## Environment", ""] + _environment(rows, code, libraries) + [""]
+    out += ["## Environment", ""] + _environment(rows, plan, versions) + [""]
     return "\n".join(out)

@@ -22,7 +22,7 @@ _FLOATS = ("h_min", "t99_s", "final_percent", "lowest_altitude", "flight_time_s"
 def _parse(name: str, text: str):
     """One cell of the table as the :class:`~kite_rto.campaign.results.RunResult` field ``name`` holds it (the
     other fields, ``times_s``, ``percent`` and ``altitude``, are JSON lists)."""
-    if name in ("scenario", "method", "message"):
+    if name in ("scenario", "method", "message", "code_version"):
         return text
     if name == "tuning":
         if text not in ("True", "False"):
@@ -47,8 +47,10 @@ def read_table(path) -> list:
     with open(path, newline="") as f:
         reader = csv.DictReader(f)
         if tuple(reader.fieldnames or ()) != TABLE_COLUMNS:
+            hint = ("; without code_version it cannot name the code its runs were computed with: run its campaign "
+                    "again" if set(TABLE_COLUMNS) - set(reader.fieldnames or ()) == {"code_version"} else "")
             raise ValueError(f"{path}: columns {reader.fieldnames} differ from a campaign table's "
-                             f"{list(TABLE_COLUMNS)}")
+                             f"{list(TABLE_COLUMNS)}{hint}")
         rows = []
         for line, cells in enumerate(reader, start=2):
             values = {}

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 from functools import partial
 
 from ..flight.shape import ShapeBox
+from ..rto.judge import judge, reaches
 from ..rto.oracle import find_oracle
 from ..rto.settings import KiteRTOSettings
-from .judge import judge, reaches
 from .methods import fly_baseline, fly_gma
 from .results import RunResult
 from .scenarios import Scenario
@@ -61,9 +61,9 @@ def gma_task(spec: RunSpec, oracle: dict) -> dict:
     check_code_version(spec.code)
     t0 = time.perf_counter()
     flown = fly_gma(spec.scenario, spec.seed, spec.n_iter, spec.settings)
-    verdict = judge(spec.scenario, oracle["tension_kn"], flown.iterates, flown.times)
+    verdict = judge(spec.scenario.plant, spec.scenario.h_min, oracle["tension_kn"], flown.iterates, flown.times)
     return RunResult.judged(spec.scenario, spec.seed, spec.method, flown, verdict, oracle["tension_kn"], None,
-                            time.perf_counter() - t0).to_dict()
+                            spec.code, time.perf_counter() - t0).to_dict()
 
 
 def baseline_budget(budget: float, gma_row: dict) -> float:
@@ -78,8 +78,8 @@ def baseline_task(spec: RunSpec, oracle: dict, gma_row: dict) -> dict:
     check_code_version(spec.code)
     t0 = time.perf_counter()
     budget_s = baseline_budget(spec.budget, gma_row)
-    stop = partial(reaches, spec.scenario, oracle["tension_kn"])
+    stop = partial(reaches, spec.scenario.plant, spec.scenario.h_min, oracle["tension_kn"])
     flown = fly_baseline(spec.method, spec.scenario, spec.seed, spec.settings, budget_s, stop)
-    verdict = judge(spec.scenario, oracle["tension_kn"], flown.iterates, flown.times)
+    verdict = judge(spec.scenario.plant, spec.scenario.h_min, oracle["tension_kn"], flown.iterates, flown.times)
     return RunResult.judged(spec.scenario, spec.seed, spec.method, flown, verdict, oracle["tension_kn"], budget_s,
-                            time.perf_counter() - t0).to_dict()
+                            spec.code, time.perf_counter() - t0).to_dict()

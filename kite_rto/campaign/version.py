@@ -1,10 +1,10 @@
 """The code-version tag of campaign results (:func:`code_version`): part of every cache key, checked on workers.
 
-A SHA-1 over the source of every module that decides a run's numbers (``kite``, ``flight``, ``gma``, ``rto``,
-``cache.py`` and the campaign's methods, tasks, judge and result rows; the scenarios enter the keys by value) and
-the versions of the numerical libraries they call. Any change to either gives
-new keys, so no cached result of other code is reused; a worker whose tag differs from the client's refuses the
-task (:func:`check_code_version`), so a cluster running other code cannot mix its numbers in.
+A SHA-1 over the source of every module that decides a run's numbers (``kite``, ``flight``, ``gma``, ``rto``
+with the judge ``rto/judge.py``, ``cache.py`` and the campaign's methods, tasks and result rows; the scenarios enter
+the keys by value) and the versions of the numerical libraries they call. Any change to either gives new keys, so
+no cached result of other code is reused; a worker whose tag differs from the client's refuses the task
+(:func:`check_code_version`), so a cluster running other code cannot mix its numbers in.
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from pathlib import Path
 __all__ = ["code_version", "check_code_version", "library_versions"]
 
 _PACKAGES = ("kite", "flight", "gma", "rto")
-_MODULES = ("cache.py", "campaign/methods.py", "campaign/tasks.py", "campaign/judge.py", "campaign/results.py")
+_MODULES = ("cache.py", "campaign/methods.py", "campaign/tasks.py", "campaign/results.py")
 _LIBRARIES = ("numpy", "scipy", "casadi", "scikit-learn", "bayesian-optimization", "hipersim")
 
 

@@ -8,8 +8,8 @@
   noise level, upper confidence bound) on measured experiments in box-normalized shape coordinates.
 
 Each returns a :class:`BaselineRun`: the candidate setpoints it would recommend after each experiment and the
-flight time at which it could; the campaign's :func:`kite_rto.campaign.judge.judge` judges the candidates on the
-deterministic plant.
+flight time at which it could; :func:`kite_rto.rto.judge.judge` judges the candidates on the deterministic
+plant.
 """
 from __future__ import annotations
 

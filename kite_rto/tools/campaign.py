@@ -3,9 +3,11 @@
 Runs on a ``LocalCluster`` (one process and one thread per worker, ``--workers`` default: the machine's cores)
 or, with ``--scheduler ADDRESS``, on a running Dask scheduler and its workers. Finished runs are cached, one JSON
 per run, in ``--cache-dir`` (default the ``campaign`` folder of the kite_rto cache) and never run again; only the
-missing ones start a cluster. Writes ``results.csv``, ``wall.csv``, ``summary.md`` and ``campaign.png`` to
-``--out`` and prints the summary. Exit code 0, 1 if a run failed, 2 on a bad argument, 130 on Ctrl-C (finished
-runs stay cached). docs/campaign.md.
+missing ones start a cluster. Writes ``results.csv``, its manifest ``results.manifest.json`` (the planned runs,
+the failed ones, the code and library versions), ``wall.csv``, ``summary.md`` (computed from the table and the
+manifest as written, so ``campaign_summary`` gives the same text) and ``campaign.png`` to ``--out`` and prints the
+summary. Exit code 0, 1 if a run failed, 2 on a bad argument, 130 on Ctrl-C (finished runs stay cached).
+docs/campaign.md.
 """
 from __future__ import annotations
 
@@ -18,17 +20,19 @@ from pathlib import Path
 
 from ..cache import cache_dir
 from ..campaign.executor import ResultCache, pending
+from ..campaign.manifest import manifest_path, plan_of, read_manifest, write_manifest
 from ..campaign.methods import GMA, METHODS
-from ..campaign.plan import Campaign, run_campaign
+from ..campaign.plan import Campaign, CampaignRun, campaign_manifest, run_campaign
 from ..campaign.results import write_table, write_wall_times
 from ..campaign.scenarios import select_scenarios
 from ..campaign.summary import summarize
+from ..campaign.tables import read_table
 from ..campaign.variants import load_variants, parse_variant
 from ..campaign.version import library_versions
 from ..rto.settings import KiteRTOSettings
 from .campaign_plot import plot_campaign
 
-__all__ = ["main", "build_campaign"]
+__all__ = ["main", "build_campaign", "write_outputs"]
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -70,6 +74,21 @@ def build_campaign(args) -> Campaign:
     return Campaign(scenarios=tuple(select_scenarios(args.scenarios)),
                     seeds=tuple(range(args.first_seed, args.first_seed + args.seeds)), methods=methods,
                     variants=tuple(variants.items()), n_iter=args.iters, budget=args.budget)
+
+
+def write_outputs(out: Path, campaign: Campaign, result: CampaignRun) -> str:
+    """Write ``results.csv``, ``results.manifest.json``, ``wall.csv``, ``summary.md`` and (with results)
+    ``campaign.png`` to ``out``; return the summary, computed from the table and manifest read back."""
+    out.mkdir(parents=True, exist_ok=True)
+    write_table(out / "results.csv", result.results)
+    write_manifest(manifest_path(out / "results.csv"), campaign_manifest(campaign, result, library_versions()))
+    write_wall_times(out / "wall.csv", result.results)
+    rows = read_table(out / "results.csv")
+    text = summarize(rows, plan_of([read_manifest(manifest_path(out / "results.csv"))]))
+    (out / "summary.md").write_text(text + "\n")
+    if rows:
+        plot_campaign(out / "campaign.png", rows)
+    return text
 
 
 @contextmanager
@@ -120,23 +139,18 @@ def main(argv=None) -> int:
     else:
         result = run_campaign(campaign, cache, None, progress=False)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_table(out / "results.csv", result.results)
-    write_wall_times(out / "wall.csv", result.results)
-    text = (summarize(result.results, campaign.budget, campaign.code, library_versions()) if result.results
-            else "# Scenario campaign: no results\n")
-    (out / "summary.md").write_text(text + "\n")
-    if result.results:
-        plot_campaign(out / "campaign.png", result.results)
+    text = write_outputs(out, campaign, result)
     print(text)
     for oracle in result.execution.transient.values():
         print(f"kite_campaign: oracle of {oracle['scenario']}: {oracle['tension_kn']:.1f} kN "
               f"({oracle['wall_s']:.1f} s on its worker, 0 when read from its cache)")
     for key, err in sorted(result.failed.items()):
         print(f"kite_campaign: FAILED {key}: {err}", file=sys.stderr)
-    print(f"kite_campaign: {len(result.results)} results ({len(result.execution.submitted)} tasks run now), "
-          f"{len(result.failed)} failed; wrote {out}/results.csv, wall.csv, summary.md, campaign.png; "
-          f"wall time {time.perf_counter() - t0:.0f} s")
+    planned = len(campaign.scenarios) * len(campaign.seeds) * len(campaign.table_methods())
+    print(f"kite_campaign: {len(result.results)} of {planned} planned results ({len(result.execution.submitted)} "
+          f"tasks run now), {len(result.failed)} tasks failed ({len(result.failed_runs)} of the table's runs); wrote "
+          f"{out}/results.csv, results.manifest.json, wall.csv, summary.md{', campaign.png' if result.results else ''}"
+          f"; wall time {time.perf_counter() - t0:.0f} s")
     return 1 if result.failed else 0
 
 

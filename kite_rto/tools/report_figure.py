@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..flight.path import FigureEightPath, Setpoints
+from ..rto.judge import REACH_PERCENT
 from .plots import nw_coordinates
 
 __all__ = ["report_figure"]
@@ -77,7 +78,7 @@ def report_figure(history, rows, oracle, out: Path, samples=None, laps=None) -> 
     ax = axes[1, 1]
     if oracle is not None:
         ax.plot([r["percent_of_oracle"] for r in rows], "o-", label="judged tension, % of oracle")
-        ax.axhline(99.0, color="k", ls=":", lw=1)
+        ax.axhline(REACH_PERCENT, color="k", ls=":", lw=1)
         ax2 = ax.twinx()
         ax2.plot([r["judged_min_altitude_m"] for r in rows], "s--", color="C3", label="judged min altitude (m)")
         ax2.axhline(100.0, color="C3", ls=":", lw=1)

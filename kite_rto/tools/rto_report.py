@@ -26,7 +26,9 @@ from ..flight.shape import ShapeBox, setpoints_from_shape
 from ..gma import HistoryStore, StoreError
 from ..kite.params import KiteParams
 from ..kite.plant import PlantConfig
-from ..rto.oracle import find_oracle, plant_performance
+from ..rto.experiment import ExperimentSpec
+from ..rto.judge import judge_point
+from ..rto.oracle import find_oracle
 from .mcap_history import history_from_mcap, read_mcap
 from .plots import plot_paths
 from .report_figure import report_figure
@@ -38,18 +40,21 @@ def _deg(c) -> str:
     return "/".join(f"{math.degrees(x):.2f}" for x in c)
 
 
-def judge_iterates(history, config: PlantConfig, oracle, h_min: float = 100.0) -> list[dict]:
+def judge_iterates(history, config: PlantConfig, h_min: float, oracle) -> list[dict]:
     """One row per iterate c_0 .. c_K (GMA's shape coordinates, judged as setpoints): measured values (if any)
-    and the deterministic-plant judgement (``oracle`` None: no judgement, the judged fields are None)."""
+    and the judgement (:func:`~kite_rto.rto.judge.judge_point`) on ``config``'s deterministic plant against
+    ``oracle`` and the floor of ``h_min`` (m) (``oracle`` None: no judgement, the judged fields are None)."""
     iterates = [setpoints_from_shape(history.c0)] + [setpoints_from_shape(r.c_next) for r in history.iterations]
     rows = []
     for k, c in enumerate(iterates):
-        t_kn, z = plant_performance(config, c) if oracle is not None else (None, None)
+        j = judge_point(config, h_min, oracle.tension_kn, c) if oracle is not None else None
         rec = history.iterations[k] if k < len(history.iterations) else None
-        rows.append({"k": k, "c_deg": np.degrees(c).round(3).tolist(), "judged_tension_kN": t_kn,
-                     "judged_min_altitude_m": z,
-                     "percent_of_oracle": None if t_kn is None else 100.0 * t_kn / oracle.tension_kn,
-                     "feasible": None if z is None else bool(z >= h_min - 2.0),
+        rows.append({"k": k, "c_deg": np.degrees(c).round(3).tolist(),
+                     "judged_tension_kN": None if j is None else j.tension_kn,
+                     "judged_min_altitude_m": None if j is None else j.min_altitude,
+                     "percent_of_oracle": None if j is None else j.percent,
+                     "feasible": None if j is None else j.above_floor,
+                     "reached": None if j is None else j.reached,
                      "measured_tension_kN": None if rec is None else -rec.cost,
                      "measured_g_m": None if rec is None else float(rec.constraints[0]),
                      "decision": None if rec is None else rec.decision})
@@ -57,22 +62,26 @@ def judge_iterates(history, config: PlantConfig, oracle, h_min: float = 100.0) -
 
 
 def write_report(history, out: Path, config: PlantConfig | None = None, box: ShapeBox | None = None,
-                 samples=None, laps=None, extra: dict | None = None, judge: bool = True) -> dict:
+                 samples=None, laps=None, extra: dict | None = None, judge: bool = True,
+                 h_min: float | None = None) -> dict:
     """Print the per-iteration table, save figures and ``summary.json`` in ``out``; return the summary.
 
-    ``judge=False``: no oracle and no deterministic-plant judgement (measured values only).
+    ``config``, ``box``, ``h_min``: the plant, box and altitude floor (m) the oracle and the judge use (None: the
+    defaults, ``PlantConfig()``, ``ShapeBox()`` and ``ExperimentSpec().h_min``). ``judge=False``: no oracle and
+    no deterministic-plant judgement (measured values only).
     """
     config = config or PlantConfig()
     box = box or ShapeBox()
+    h_min = ExperimentSpec().h_min if h_min is None else h_min
     oracle = None
     if judge:
         print("\ncomputing the oracle (direct optimization of the deterministic plant; cached in $KITE_RTO_CACHE or "
               "the user cache directory) ...",
               flush=True)
-        oracle = find_oracle(config, box)
+        oracle = find_oracle(config, box, h_min=h_min)
         print(f"\noracle: c = {_deg(oracle.c)} deg, {oracle.tension_kn:.1f} kN, min altitude "
               f"{oracle.min_altitude:.1f} m ({oracle.evaluations} evaluations)")
-    rows = judge_iterates(history, config, oracle)
+    rows = judge_iterates(history, config, h_min, oracle)
     print(f"\n{'k':>3} {'c_k (theta_0/A_phi/A_theta deg)':>32} {'measured kN':>12} {'judged kN':>10} "
           f"{'% oracle':>9} {'min alt m':>10}  decision")
 
@@ -85,7 +94,7 @@ def write_report(history, out: Path, config: PlantConfig | None = None, box: Sha
     summary = {"model_only": rows[0], "final": rows[-1], "iterations": len(rows) - 1,
                "experiments": len(history.experiments), "judged": oracle is not None, "rows": rows}
     if oracle is not None:
-        reach = next((r["k"] for r in rows if r["percent_of_oracle"] >= 99.0 and r["feasible"]), None)
+        reach = next((r["k"] for r in rows if r["reached"]), None)
         summary.update(
             oracle={"c_deg": oracle.c_deg, "tension_kN": oracle.tension_kn, "min_altitude_m": oracle.min_altitude},
             first_iteration_at_99_percent=reach,
