@@ -70,7 +70,7 @@ def test_optimum_respects_bounds_and_altitude(problem, optimum):
     assert np.all(np.abs(optimum.delta) <= st.delta_max + 1e-8)
     assert optimum.g <= 1e-6
     assert 0.0 <= optimum.softmin_bias <= st.softmin_sharpness * math.log(st.n_intervals)
-    assert optimum.min_altitude >= st.h_min - 1e-6
+    assert optimum.min_altitude >= problem.h_min - 1e-6
 
 
 def test_outputs_are_the_projection_of_the_nodes(problem, optimum):

@@ -128,12 +128,13 @@ class KiteOCPSettings:
 class KiteModelProblem(ModelProblem):
     """A :class:`ModelProblem` that remembers the kite it was built from (for :func:`unpack` and reports).
 
-    Extra attributes: ``params``, ``settings``; symbolic ``mean_tension`` (N, without the steering-rate
-    regularization) and ``node_altitudes`` (m, shape (N,)), functions of ``u``.
+    Extra attributes: ``params``, ``settings``, ``h_min`` (m); symbolic ``mean_tension`` (N, without the
+    steering-rate regularization) and ``node_altitudes`` (m, shape (N,)), functions of ``u``.
     """
 
     params: KiteParams = field(default_factory=KiteParams)
     settings: KiteOCPSettings = field(default_factory=KiteOCPSettings)
+    h_min: float = H_MIN
     mean_tension: ca.SX | None = None
     node_altitudes: ca.SX | None = None
 
@@ -232,7 +233,7 @@ def model_problem(params: KiteParams | None = None, settings: KiteOCPSettings | 
         outputs=shape_from_setpoints(setpoints) if shape else setpoints,
         lbu=lbu, ubu=ubu, c_lb=c_lb, c_ub=c_ub,
         u0=path_guess(params, settings, setpoints_from_shape(c_guess) if shape else c_guess),
-        equalities=equalities, inner_constraints=None, name=name, params=params, settings=settings,
+        equalities=equalities, inner_constraints=None, name=name, params=params, settings=settings, h_min=h_min,
         mean_tension=mean_tension, node_altitudes=z)
 
 

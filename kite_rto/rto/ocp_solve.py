@@ -141,7 +141,7 @@ def _solution(pr: KiteModelProblem, s: _Solvers, sol, stats, elapsed) -> OCPSolu
     return OCPSolution(
         u=u, c=y, cost=float(cost[0]), g=float(g[0]),
         mean_tension_kn=float(tension[0]) / 1000.0, min_altitude=z_min,
-        softmin_bias=z_min - (st.h_min - g_m), period=parts["period"], delta=parts["delta"],
+        softmin_bias=z_min - (pr.h_min - g_m), period=parts["period"], delta=parts["delta"],
         states=parts["states"], t=parts["t"], iterations=int(stats["iter_count"]), solve_time=elapsed,
         status=str(stats["return_status"]), lam_x=np.asarray(sol["lam_x"]).ravel(),
         lam_g=np.asarray(sol["lam_g"]).ravel())
