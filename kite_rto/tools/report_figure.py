@@ -18,12 +18,13 @@ def _legend(ax, **kw) -> None:
         ax.legend(**kw)
 
 
-def report_figure(history, rows, oracle, out: Path, samples=None, laps=None) -> None:
+def report_figure(history, rows, oracle, out: Path, samples=None, laps=None, h_min: float | None = None) -> None:
     """Save ``out/report.png``: flown paths and references per iterate, tension per lap against the oracle,
     setpoints per iteration and the judged (or measured) performance per iteration.
 
     ``rows`` are :func:`~kite_rto.tools.rto_report.judge_iterates` rows, ``oracle`` an ``OracleResult`` or None,
-    ``samples`` = (t, theta, phi) arrays (s, rad) of the flight or None, ``laps`` dicts of the /kite/laps fields.
+    ``samples`` = (t, theta, phi) arrays (s, rad) of the flight or None, ``laps`` dicts of the /kite/laps fields,
+    ``h_min`` the run's altitude floor (m; drawn when the rows are judged).
     """
     # Not on import: choosing the Agg backend is a global change that only drawing a file should make.
     import matplotlib
@@ -81,7 +82,8 @@ def report_figure(history, rows, oracle, out: Path, samples=None, laps=None) -> 
         ax.axhline(REACH_PERCENT, color="k", ls=":", lw=1)
         ax2 = ax.twinx()
         ax2.plot([r["judged_min_altitude_m"] for r in rows], "s--", color="C3", label="judged min altitude (m)")
-        ax2.axhline(100.0, color="C3", ls=":", lw=1)
+        if h_min is not None:
+            ax2.axhline(h_min, color="C3", ls=":", lw=1)
         ax.set_title("judged on the deterministic plant: tension (left), min altitude (right)")
         ax2.legend(fontsize=7, loc="upper right")
     else:

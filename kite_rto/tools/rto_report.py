@@ -29,11 +29,12 @@ from ..kite.plant import PlantConfig
 from ..rto.experiment import ExperimentSpec
 from ..rto.judge import judge_point
 from ..rto.oracle import find_oracle
+from ..rto.run import RUN_KEY, RunDescription
 from .mcap_history import history_from_mcap, read_mcap
 from .plots import plot_paths
 from .report_figure import report_figure
 
-__all__ = ["judge_iterates", "write_report", "flight_report", "report_from_mcap", "main"]
+__all__ = ["judge_iterates", "run_of", "write_report", "flight_report", "report_from_mcap", "main"]
 
 
 def _deg(c) -> str:
@@ -61,18 +62,27 @@ def judge_iterates(history, config: PlantConfig, h_min: float, oracle) -> list[d
     return rows
 
 
-def write_report(history, out: Path, config: PlantConfig | None = None, box: ShapeBox | None = None,
-                 samples=None, laps=None, extra: dict | None = None, judge: bool = True,
-                 h_min: float | None = None) -> dict:
+def run_of(history) -> RunDescription | None:
+    """The :class:`~kite_rto.rto.run.RunDescription` stored with ``history`` (None when it holds none)."""
+    data = history.meta.get(RUN_KEY)
+    return None if data is None else RunDescription.from_dict(data)
+
+
+def write_report(history, out: Path, run: RunDescription | None = None, samples=None, laps=None,
+                 extra: dict | None = None, judge: bool = True) -> dict:
     """Print the per-iteration table, save figures and ``summary.json`` in ``out``; return the summary.
 
-    ``config``, ``box``, ``h_min``: the plant, box and altitude floor (m) the oracle and the judge use (None: the
-    defaults, ``PlantConfig()``, ``ShapeBox()`` and ``ExperimentSpec().h_min``). ``judge=False``: no oracle and
-    no deterministic-plant judgement (measured values only).
+    ``run``: the run's description (default: the one stored with ``history``): its plant, box and h_min are what
+    the oracle and the judge use. A run whose plant is not known is not judged (measured values only), nor with
+    ``judge=False``.
     """
-    config = config or PlantConfig()
-    box = box or ShapeBox()
-    h_min = ExperimentSpec().h_min if h_min is None else h_min
+    run = run or run_of(history)
+    if judge and (run is None or run.plant is None):
+        print(f"\nnot judged: the run's {'description' if run is None else 'plant'} is not stored with it (a real "
+              "plant, or a file written by another version)", flush=True)
+        judge = False
+    config, box = (run.plant, run.settings.box) if run is not None else (None, ShapeBox())
+    h_min = run.h_min if run is not None else ExperimentSpec().h_min
     oracle = None
     if judge:
         print("\ncomputing the oracle (direct optimization of the deterministic plant; cached in $KITE_RTO_CACHE or "
@@ -109,7 +119,7 @@ def write_report(history, out: Path, config: PlantConfig | None = None, box: Sha
     summary.update(extra or {})
     out.mkdir(parents=True, exist_ok=True)
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
-    report_figure(history, rows, oracle, out, samples, laps)
+    report_figure(history, rows, oracle, out, samples, laps, h_min)
     print(f"saved {out / 'report.png'} and {out / 'summary.json'}")
     return summary
 
