@@ -77,9 +77,14 @@ def test_a_bad_campaign_is_refused_naming_the_value(changes, match):
 
 
 def test_variants_change_the_named_fields_and_refuse_unknown_ones():
-    name, s = parse_variant("v=fd_step=(0.3, 0.3, 0.3),gma.structure_check_every=3,gradient=central")
-    assert name == "v" and s.fd_step == (0.3, 0.3, 0.3) and s.gma.structure_check_every == 3
+    name, s = parse_variant("v=fd_step=(0.3, 0.3, 0.3),gma.trust_region.radius=0.4,gradient=central")
+    assert name == "v" and s.fd_step == (0.3, 0.3, 0.3) and s.gma.trust_region.radius == 0.4
+    assert s.gma.trust_region.min_radius == KiteRTOSettings().gma.trust_region.min_radius
     assert s.gradient == "central" and s.gma.backoff == KiteRTOSettings().gma.backoff
+    off = parse_variant("v=gma.undo=None,gma.model_secant=None")[1].gma
+    assert off.undo is None and off.model_secant is None and off.bound_hold is not None
+    on = parse_variant("v=gma.undo.sigma=2.5", replace(KiteRTOSettings(), gma=off))[1].gma
+    assert on.undo.sigma == 2.5                     # a mechanism that was off: on with its defaults, then changed
     assert parse_variant("plain") == ("plain", KiteRTOSettings())
     with pytest.raises(ValueError, match="has no field 'nope'"):
         parse_variant("v=gma.nope=1")
