@@ -75,7 +75,7 @@ class Decision(StrEnum):
     CONVERGED = "converged"
     """Moved by less than ``tol_c``: a fixed point."""
     UNDONE = "step undone"
-    """Went back to ``c_{k-1}``: the cost measured at ``c_k`` rose significantly (``GMASettings.reject_sigma``)."""
+    """Went back to ``c_{k-1}``: a mechanism rejected ``c_k`` (e.g. :class:`~kite_rto.gma.Undo`: its cost rose)."""
     HOLD_NO_REALIZATION = "hold: the model cannot realize c_k"
     """Stayed: the model has no realization of the operating point."""
     HOLD_BAD_GRADIENT = "hold: unusable gradient estimate"
