@@ -18,8 +18,8 @@ from kite_rto.gma import HistoryStore
 from kite_rto.kite.params import KiteParams
 from kite_rto.rto.builder import make_gma
 from kite_rto.rto.experiment import ExperimentOutcome, ExperimentSpec
-from kite_rto.rto.optimizer_run import OptimizerRun
-from kite_rto.rto.run_db import SETTINGS_KEY, open_run_database
+from kite_rto.runtime.optimizer_run import OptimizerRun
+from kite_rto.runtime.run_db import SETTINGS_KEY, open_run_database
 from kite_rto.rto.session import RTOSession
 from kite_rto.rto.settings import KiteRTOSettings
 

@@ -45,6 +45,9 @@ CROSSINGS = {
     "rclpy in campaign": ("campaign/judge.py", "import rclpy", "never imports ROS 2"),
     "campaign in rto": ("rto/baselines.py", "from ..campaign import scenarios", "Layers"),
     "nodes in campaign": ("campaign/summary.py", "from ..nodes import topics", "Layers"),
+    "rclpy in runtime": ("runtime/pace.py", "import rclpy", "never imports ROS 2"),
+    "runtime in rto": ("rto/session.py", "from ..runtime import sample_join", "Layers"),
+    "nodes in runtime": ("runtime/run_db.py", "from ..nodes import topics", "Layers"),
 }
 
 

@@ -22,7 +22,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints
-from kite_rto.flight.sources import UNKNOWN_NODE
+from kite_rto.runtime.sources import UNKNOWN_NODE
 from kite_rto.nodes.interface import LATCHED, stamp_to_ns
 
 from faultgraph import QUIET, Proc, decode_path, node, stop_all

@@ -441,7 +441,7 @@ def test_bad_optimizer_inputs_keep_the_experiments_clean(probe, ros_env, request
 def test_sample_join_keeps_the_timeline():
     """The optimizer's join: lone junk parts never complete and are reported; only a complete sample stamped
     before the last one is a plant restart; a flood of junk cannot starve genuine samples."""
-    from kite_rto.flight.sample_join import SampleJoin
+    from kite_rto.runtime.sample_join import SampleJoin
 
     j = SampleJoin(max_pending=8)
 

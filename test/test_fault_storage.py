@@ -25,12 +25,12 @@ from sensor_msgs.msg import JointState
 import kite_rto.gma.gma as gma_module
 from kite_rto.flight.shape import setpoints_from_shape
 from kite_rto.gma import History, HistoryStore
-from kite_rto.gma.store_fault import DiskFull
+from kite_rto.runtime.store_fault import DiskFull
 from kite_rto.nodes.interface import LATCHED, stamp_to_ns
 from kite_rto.nodes.optimizer_params import PARAMS, run_settings
 from kite_rto.rto.builder import make_gma
 from kite_rto.rto.experiment import ExperimentSpec
-from kite_rto.rto.run_db import SETTINGS_KEY, RunDatabaseError, open_run_database, settings_differences
+from kite_rto.runtime.run_db import SETTINGS_KEY, RunDatabaseError, open_run_database, settings_differences
 from kite_rto.rto.settings import KiteRTOSettings
 from kite_rto.tools.graph import node_command
 

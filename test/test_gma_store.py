@@ -9,7 +9,7 @@ import pytest
 
 from kite_rto.gma import StoreError, run_offline
 from kite_rto.gma.store import HistoryStore
-from kite_rto.gma.store_fault import DiskFull
+from kite_rto.runtime.store_fault import DiskFull
 
 from test_gma_history import Plant, make
 

@@ -17,7 +17,7 @@ from sensor_msgs.msg import JointState
 from kite_rto.flight.shape import setpoints_from_shape, shape_from_setpoints
 from kite_rto.gma import HistoryStore
 from kite_rto.nodes.interface import LATCHED, MEASUREMENTS, RELIABLE_10, stamp_to_ns
-from kite_rto.rto.operator_log import MANUAL, TRANSITION
+from kite_rto.runtime.operator_log import MANUAL, TRANSITION
 from kite_rto.rto.settings import KiteRTOSettings
 
 from rosutil import Probe, start_node, stop

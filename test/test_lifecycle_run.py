@@ -9,7 +9,7 @@ import numpy as np
 from kite_rto.flight.shape import setpoints_from_shape, shape_from_setpoints
 from kite_rto.gma import HistoryStore
 from kite_rto.rto.builder import make_gma
-from kite_rto.rto.operator_log import MANUAL, TRANSITION, transition_event, was_paused
+from kite_rto.runtime.operator_log import MANUAL, TRANSITION, transition_event, was_paused
 
 from storage_flight import DT, SETTINGS, TICK, Flight
 

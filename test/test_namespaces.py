@@ -16,7 +16,7 @@ from sensor_msgs.msg import JointState
 
 from kite_rto.flight.closed_loop import make_closed_loop, run_closed_loop
 from kite_rto.flight.path import Setpoints
-from kite_rto.flight.sources import parse_source
+from kite_rto.runtime.sources import parse_source
 from kite_rto.nodes import topics as T
 from kite_rto.nodes.interface import LATCHED, stamp_to_ns
 from kite_rto.nodes.namespace import (GRAPH_CLOCK_RULE, NamespaceError, add_namespace_option, check_namespace,

@@ -1,9 +1,9 @@
-"""The real-time plant's pacer (kite_rto/kite/pace.py) and the shipped DDS profile's lookup (no DDS)."""
+"""The real-time plant's pacer (kite_rto/runtime/pace.py) and the shipped DDS profile's lookup (no DDS)."""
 import os
 
 import pytest
 
-from kite_rto.kite.pace import PaceSettings, RealtimePacer
+from kite_rto.runtime.pace import PaceSettings, RealtimePacer
 from kite_rto.nodes import dds_profile
 
 DT = 0.02

@@ -8,10 +8,11 @@ import pytest
 
 from kite_rto.flight.controller import ControllerSettings, PathController
 from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints
-from kite_rto.flight.sample_join import Place, Timeline
-from kite_rto.flight.setpoint_inbox import SUMMARY_PERIOD
-from kite_rto.flight.sources import SOURCE_QUIET, Publisher, SourceWatch, node_name, parse_source
-from kite_rto.flight.steering_loop import PATH_PERIOD, PLANT_QUIET, SETPOINTS_WAIT, SYNC_ABSENT, SYNC_NAMES, SteeringLoop
+from kite_rto.runtime.sample_join import Place, Timeline
+from kite_rto.runtime.setpoint_inbox import SUMMARY_PERIOD
+from kite_rto.runtime.sources import SOURCE_QUIET, Publisher, SourceWatch, node_name, parse_source
+from kite_rto.runtime.steering_loop import (PATH_PERIOD, PLANT_QUIET, SETPOINTS_WAIT, SYNC_ABSENT, SYNC_NAMES,
+                                           SteeringLoop)
 from kite_rto.kite.params import ParameterError
 from kite_rto.kite.params import KiteParams
 from kite_rto.kite.model import shared_model

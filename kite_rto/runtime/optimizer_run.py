@@ -32,7 +32,7 @@ import numpy as np
 
 from ..flight.path import SetpointError, validate_setpoints
 from ..flight.shape import setpoints_from_shape, shape_from_setpoints
-from ..flight.sample_join import RejectLog, SampleJoin, reading_error, state_values
+from .sample_join import RejectLog, SampleJoin, reading_error, state_values
 from ..gma import StoreError
 from ..kite.params import KiteParams
 from .operator_log import MANUAL

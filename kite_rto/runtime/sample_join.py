@@ -11,7 +11,7 @@ stale/future junk. It is held as a candidate and only accepted when the next com
 stamp within the gap); if the old timeline goes on instead, it was junk and is reported. A lone part whose stamp
 matches no complete sample is never used; if it is far from the timeline it is reported as stale or future too
 (:attr:`SampleJoin.discarded`). The rule is :class:`Timeline`, the one the controller's
-:class:`~kite_rto.flight.steering_loop.SteeringLoop` follows too.
+:class:`~kite_rto.runtime.steering_loop.SteeringLoop` follows too.
 """
 from __future__ import annotations
 

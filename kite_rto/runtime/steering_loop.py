@@ -25,11 +25,11 @@ import math
 import time
 from types import SimpleNamespace
 
+from ..flight.controller import PathController
+from ..flight.laps import LapDetector
+from ..flight.path import Setpoints, SetpointError
 from ..kite.model import shared_model
-from .controller import PathController
-from .laps import LapDetector
 from .optimizer_sync import SYNC_ABSENT, SYNC_NAMES, OptimizerSync, keep
-from .path import Setpoints, SetpointError
 from .sample_join import Place, RejectLog, Timeline, reading_error, state_values
 from .setpoint_inbox import SetpointInbox, fmt_setpoints
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 import time
 
-from .path import Setpoints, SetpointError, setpoints_in_box
+from ..flight.path import Setpoints, SetpointError, setpoints_in_box
 from .sources import SourceGuard
 
 __all__ = ["SetpointInbox", "SUMMARY_PERIOD", "fmt_setpoints"]
@@ -38,9 +38,9 @@ def fmt_setpoints(c: Setpoints) -> str:
 class SetpointInbox:
     """The latest checked /rto/setpoints message, its counts and its logging (see the module docstring).
 
-    ``box``: the accepted :class:`~.path.SetpointBox`; ``reject(key, text)``: throttled warnings (RejectLog);
-    ``logger`` has ``info``/``warning``; ``clock``: wall s; ``source``: the only node whose setpoints apply
-    (fully qualified, e.g. ``/optimizer``), None for any; ``publishers()``: the current publishers of
+    ``box``: the accepted :class:`~kite_rto.flight.path.SetpointBox`; ``reject(key, text)``: throttled warnings
+    (RejectLog); ``logger`` has ``info``/``warning``; ``clock``: wall s; ``source``: the only node whose setpoints
+    apply (fully qualified, e.g. ``/optimizer``), None for any; ``publishers()``: the current publishers of
     /rto/setpoints (:class:`~.sources.Publisher` list) and ``matched()`` the number the subscription is matched
     with, asked only when ``source`` is set (:attr:`guard`).
     """
