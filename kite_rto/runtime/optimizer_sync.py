@@ -8,9 +8,9 @@ optimizer answers unsynchronized, once no publisher of /rto/sync has been in the
 (no optimizer at all), and from then on at once until a sync message arrives; /rto/setpoints then applies at the
 sample boundary as without synchronization.
 
-:class:`OptimizerSync` is the half of :class:`~.steering_loop.SteeringLoop` that does this; it uses the loop's
-``_steer``, ``_apply_setpoints``, ``_take_setpoints``, ``_stamp_near``, ``reject``, ``log``, ``_clock``,
-``_sync_sources``, ``timeline`` and ``controller``.
+:class:`OptimizerSync` is this state and its decisions, owned by :class:`~.steering_loop.SteeringLoop`: which
+sample is held, which sync entries wait for their samples, whether an optimizer is known. It never steers: each
+method that ends a wait returns the held sample, and the loop answers it.
 """
 from __future__ import annotations
 
@@ -36,76 +36,97 @@ def keep(entries: dict, stamp: int, value) -> None:
 
 
 class OptimizerSync:
-    """Holds each sample for the optimizer's sync message (see the module docstring); a mixin of SteeringLoop."""
+    """Holds each sample for the optimizer's sync message (see the module docstring).
 
-    def _init_sync(self, sync: bool) -> None:
-        self.sync = sync
+    ``enabled``: synchronization asked for (``sync_optimizer``); ``log`` has ``info``/``warning``; ``reject(what,
+    why)`` reports a bad message; ``clock()`` is the wall time; ``sync_sources()`` counts the publishers of /rto/sync.
+    A held sample is ``(stamp, measurement, position, wall time held)``.
+    """
+
+    def __init__(self, enabled: bool, *, log, reject, clock, sync_sources):
+        self.enabled = enabled
+        self.log, self.reject, self._clock, self._sync_sources = log, reject, clock, sync_sources
+        self.held = None                  # (stamp, measurement, position, wall time): waits for its sync
         self._syncs = {}                  # sync entries by stamp (ns): (setpoints rad, updates)
-        self._sync_held = None            # (stamp, measurement, position, wall time): waits for its sync
-        self._sync_lost = False           # no optimizer: answer at once until a sync message arrives again
-        self._sync_updates = None         # `updates` of the last applied sync
-        self._sync_seen = -math.inf       # wall time an optimizer was last seen in the graph while a sample waited
+        self._lost = False                # no optimizer: answer at once until a sync message arrives again
+        self._updates = None              # `updates` of the last applied sync
+        self._seen = -math.inf            # wall time an optimizer was last seen in the graph while a sample waited
 
     def synchronized(self) -> bool:
         """True while samples wait for the optimizer's sync message."""
-        return self.sync and not self._sync_lost
+        return self.enabled and not self._lost
 
-    def _wait_for_sync(self, stamp: int) -> bool:
-        """True to hold the sample stamped ``stamp`` for its sync; applies the sync message if it is in."""
+    def entry(self, stamp: int):
+        """The sync entry ``(setpoints, updates)`` of the sample ``stamp`` if it is in (None if not); older entries
+        are forgotten."""
         entry = self._syncs.pop(stamp, None)
         if self._syncs:
             for s in [s for s in self._syncs if s < stamp]:
                 del self._syncs[s]
-        if entry is not None:
-            self._apply_sync(*entry)
+        return entry
+
+    def hold(self, stamp: int, m, pos) -> bool:
+        """Hold the sample (its entry not in) until its sync message arrives: False (answer it now) once no
+        optimizer is known."""
+        if self._lost:
             return False
-        return not self._sync_lost
+        self.held = (stamp, m, pos, self._clock())
+        return True
 
-    def _apply_sync(self, c, updates: float) -> None:
-        if updates != self._sync_updates or c != self.controller.setpoints.as_array().tolist():
-            self._sync_updates = updates
-            self._apply_setpoints(c)
+    def changes(self, c, updates: float, flown) -> bool:
+        """True if the synced setpoints ``c`` must be applied: the optimizer's count of setpoint messages changed,
+        or ``c`` differs from the setpoints ``flown`` (lists, rad)."""
+        if updates != self._updates or c != flown:
+            self._updates = updates
+            return True
+        return False
 
-    def sync_message(self, stamp: int, names, values) -> None:
-        """The optimizer has processed the sample ``stamp``: ``values`` are :data:`SYNC_NAMES`."""
+    def parse(self, names, values):
+        """A /rto/sync message's entry ``(setpoints, updates)``, or None (rejected) if it is malformed."""
         vals = [float(x) for x in values]
         if list(names) != SYNC_NAMES or len(vals) != 4 or not all(map(math.isfinite, vals)):
             self.reject("sync", f"rejected sync message {(list(names), vals)!r}: expected names {SYNC_NAMES} "
                                 "with 4 finite values")
-            return
-        if not self._stamp_near("sync", stamp):
-            return
-        if self._sync_lost:
-            self._sync_lost = False
-            self.log.info("/rto/sync is back: answering each sample after the optimizer again")
-        held = self._sync_held
-        if held is not None and held[0] == stamp:
-            self._sync_held = None
-            self._apply_sync(vals[:3], vals[3])
-            self._steer(*held[:3])
-        elif self.timeline.last is None or stamp > self.timeline.last:
-            keep(self._syncs, stamp, (vals[:3], vals[3]))
+            return None
+        return vals[:3], vals[3]
 
-    def watchdog(self) -> None:
-        """Call periodically (the node: every 0.05 s): releases a held sample when there is no optimizer at all."""
-        held = self._sync_held
+    def arrived(self, stamp: int, entry, last: int | None):
+        """The optimizer has processed the sample ``stamp`` (the loop's last answered sample: ``last``): the held
+        sample if it is that one (the loop applies ``entry`` and answers it), else None (the entry is kept for a
+        sample still to come)."""
+        if self._lost:
+            self._lost = False
+            self.log.info("/rto/sync is back: answering each sample after the optimizer again")
+        held = self.held
+        if held is not None and held[0] == stamp:
+            self.held = None
+            return held
+        if last is None or stamp > last:
+            keep(self._syncs, stamp, entry)
+        return None
+
+    def overdue(self):
+        """The held sample if it is to be answered unsynchronized because there is no optimizer at all (called
+        periodically), else None."""
+        held = self.held
         if held is None:
-            return
+            return None
         now = self._clock()
-        if self._sync_updates is not None or self._sync_sources() > 0:
-            self._sync_seen = now
+        if self._updates is not None or self._sync_sources() > 0:
+            self._seen = now
             if now - held[3] > SYNC_WAIT_LOG:
                 self.log.info(f"sample at {held[0] * 1e-9:.2f} s: waiting {now - held[3]:.0f} s for the optimizer's "
                               "/rto/sync", throttle_duration_sec=SYNC_WAIT_LOG)
-        elif now - max(held[3], self._sync_seen) > SYNC_ABSENT:
-            self._release_unsynced(f"no optimizer in the graph for {SYNC_ABSENT:g} s")
+        elif now - max(held[3], self._seen) > SYNC_ABSENT:
+            return self.release(f"no optimizer in the graph for {SYNC_ABSENT:g} s")
+        return None
 
-    def _release_unsynced(self, why: str) -> None:
-        """Answer the held sample with the latest setpoints; answer at once until a sync message is back."""
-        stamp, m, pos, _ = self._sync_held
-        self._sync_held = None
-        self._sync_lost = True
-        self.log.warning(f"sample at {stamp * 1e-9:.2f} s: {why}; steering unsynchronized until the "
+    def release(self, why: str):
+        """Stop waiting for the held sample (returned: the loop answers it with the latest setpoints); answer at once
+        until a sync message is back."""
+        held = self.held
+        self.held = None
+        self._lost = True
+        self.log.warning(f"sample at {held[0] * 1e-9:.2f} s: {why}; steering unsynchronized until the "
                          "optimizer's /rto/sync is back")
-        self._take_setpoints()
-        self._steer(stamp, m, pos)
+        return held

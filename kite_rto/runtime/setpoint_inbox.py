@@ -22,10 +22,13 @@ import time
 from ..flight.path import Setpoints, SetpointError, setpoints_in_box
 from .sources import SourceGuard
 
-__all__ = ["SetpointInbox", "SUMMARY_PERIOD", "fmt_setpoints"]
+__all__ = ["SetpointInbox", "StartupWait", "SUMMARY_PERIOD", "SETPOINTS_GRACE", "SETPOINTS_WAIT", "fmt_setpoints"]
 
 SUMMARY_PERIOD = 5.0
 """Wall s: at most one ``new setpoints`` line per period; a summary line per period while more arrive."""
+SETPOINTS_GRACE, SETPOINTS_WAIT = 1.0, 3.0
+"""Wall s after start-up during which the controller waits for /rto/setpoints before steering (see
+:meth:`StartupWait.waiting`): always for the first, while an optimizer is known for the second."""
 _NAMES = Setpoints.names()
 _SORTED = sorted(_NAMES)
 
@@ -123,3 +126,32 @@ class SetpointInbox:
                           + (f", ignored {self.ignored} in all" if self.ignored else "")
                           + f"; flying {fmt_setpoints(flying)}")
         self._since, self._rx, self._app, self._quiet = now, 0, 0, 0
+
+
+class StartupWait:
+    """The controller's wait for the optimizer's setpoints at start-up, before it steers.
+
+    A controller started into a running loop (e.g. restarted after a crash) would otherwise steer the kite towards
+    its initial setpoints until the latched setpoints arrive. ``setpoint_sources()`` counts the publishers of
+    /rto/setpoints; ``logger`` has ``info``/``warning``; ``clock`` gives wall seconds. :attr:`over` is True once
+    setpoints were accepted (the loop sets it) or the wait ended.
+    """
+
+    def __init__(self, setpoint_sources, logger, clock):
+        self._setpoint_sources, self.log, self._clock = setpoint_sources, logger, clock
+        self.over = False
+        self._t_up = clock()
+
+    def waiting(self, flying: Setpoints) -> bool:
+        """True (do not steer yet) while the optimizer's setpoints may still be on their way: while a setpoint
+        publisher is known, or for the first SETPOINTS_GRACE s after start-up (discovery), at most SETPOINTS_WAIT s;
+        without an optimizer the loop then flies ``flying``, its initial setpoints."""
+        age = self._clock() - self._t_up
+        if age < SETPOINTS_WAIT and (age < SETPOINTS_GRACE or self._setpoint_sources() > 0):
+            self.log.info("waiting for the setpoints on /rto/setpoints before steering", throttle_duration_sec=2.0)
+            return True
+        if self._setpoint_sources() > 0:
+            self.log.warning(f"no valid setpoints on /rto/setpoints within {SETPOINTS_WAIT:g} s: flying "
+                             f"{fmt_setpoints(flying)}")
+        self.over = True                       # stop waiting (and asking the graph)
+        return False

@@ -17,14 +17,17 @@ from typing import NamedTuple
 
 from ..kite.params import ParameterError
 
-__all__ = ["Publisher", "SourceWatch", "SourceGuard", "describe", "node_name", "parse_source", "WARN_PERIOD",
-           "SOURCE_QUIET", "UNKNOWN_NODE"]
+__all__ = ["Publisher", "SourceWatch", "SourceGuard", "ServedPlant", "describe", "node_name", "parse_source",
+           "WARN_PERIOD", "SOURCE_QUIET", "PLANT_QUIET", "UNKNOWN_NODE"]
 
 WARN_PERIOD = 10.0
 """Wall s between repeated warnings about the same publishers of a topic (a new publisher is warned at once)."""
 SOURCE_QUIET = 1.0
 """Wall s after another publisher of /rto/setpoints was last seen during which every setpoint message is still
 ignored (its last messages may be delivered after the graph stopped listing it)."""
+PLANT_QUIET = 2.0
+"""Wall s: while /kite/state has several publishers, a sample off the timeline is another plant's (ignored) unless
+the timeline served has been silent this long (its plant is gone: a restart)."""
 
 
 class Publisher(NamedTuple):
@@ -141,3 +144,35 @@ class SourceGuard:
     def clean(self) -> bool:
         """True once the source has been alone for :data:`SOURCE_QUIET` s (subscribe again for its latched value)."""
         return self.others() is None and self._clock() - self._dirty_at >= self.quiet
+
+
+class ServedPlant:
+    """The plant the steering loop serves while /kite/state has several publishers (a second plant on the domain).
+
+    ``state_sources()`` counts the publishers of /kite/state, ``clock()`` gives wall seconds, ``reject(key, text)``
+    warns (throttled). The loop calls :meth:`heard` for each sample of the timeline it serves and asks
+    :meth:`other` about a sample off that timeline.
+    """
+
+    def __init__(self, state_sources, clock, reject):
+        self._state_sources, self._clock, self.reject = state_sources, clock, reject
+        self._served_at = -math.inf       # wall time of the last sample of the timeline served
+
+    def heard(self) -> None:
+        """A sample of the timeline served arrived: that plant is alive."""
+        self._served_at = self._clock()
+
+    def other(self, stamp: int, last: int | None) -> bool:
+        """True (ignore the sample, with a warning) for a sample off the timeline (``last``: its last stamp) while
+        /kite/state has several publishers and the timeline served is alive (a sample of it within
+        :data:`PLANT_QUIET` s): another plant's, not a restart."""
+        if self._clock() - self._served_at >= PLANT_QUIET:
+            return False
+        n = self._state_sources()
+        if n < 2:
+            return False
+        self.reject("other plant", f"rejected state message stamped {stamp * 1e-9:.3f} s at sim time "
+                                   f"{last * 1e-9:.3f} s: stale or future, and {n} publishers of "
+                                   "/kite/state while the kite served still flies (another plant on this domain?); "
+                                   "serving that one")
+        return True

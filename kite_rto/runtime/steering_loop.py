@@ -9,15 +9,17 @@ topics); if that reading is lost, the next sample releases the waiting one with 
 the :class:`~.sample_join.Timeline` rule shared with :class:`~.sample_join.SampleJoin`. A restart candidate is
 answered by a fresh controller, kept if the restart is confirmed; the flying controller never sees it. While
 /kite/state has several publishers (a second plant on the domain) a sample off the timeline is ignored as long as
-the timeline served is alive (:data:`PLANT_QUIET`): the controller keeps the kite it flies. Bad readings, or
-readings stamped far from the last sample, are rejected with throttled warnings.
+the timeline served is alive (:class:`~.sources.ServedPlant`): the controller keeps the kite it flies. Bad
+readings, or readings stamped far from the last sample, are rejected with throttled warnings.
 
 Setpoints (unsynchronized): each /rto/setpoints message is checked cheaply and kept; the latest is applied at the
-next sample (:class:`~.setpoint_inbox.SetpointInbox`: a flood costs at most one change per sample). The reference
-path is published after the answer, at most every :data:`PATH_PERIOD` s.
+next sample (:class:`~.setpoint_inbox.SetpointInbox`: a flood costs at most one change per sample); at start-up
+the loop waits for them before it steers (:class:`~.setpoint_inbox.StartupWait`). The reference path is published
+after the answer, at most every :data:`PATH_PERIOD` s.
 
-Synchronization (``sync=True``): :class:`~.optimizer_sync.OptimizerSync` (setpoints from the optimizer's
-/rto/sync message of each sample).
+Synchronization (``sync=True``): the loop owns an :class:`~.optimizer_sync.OptimizerSync`, which holds each sample
+for the optimizer's /rto/sync message and says when a held sample is to be answered; the loop applies the synced
+setpoints and answers.
 """
 from __future__ import annotations
 
@@ -31,17 +33,12 @@ from ..flight.path import Setpoints, SetpointError
 from ..kite.model import shared_model
 from .optimizer_sync import SYNC_ABSENT, SYNC_NAMES, OptimizerSync, keep
 from .sample_join import Place, RejectLog, Timeline, reading_error, state_values
-from .setpoint_inbox import SetpointInbox, fmt_setpoints
+from .setpoint_inbox import SETPOINTS_GRACE, SETPOINTS_WAIT, SetpointInbox, StartupWait, fmt_setpoints
+from .sources import PLANT_QUIET, ServedPlant
 
 __all__ = ["SteeringLoop", "fmt_setpoints", "SYNC_ABSENT", "SETPOINTS_GRACE", "SETPOINTS_WAIT", "SYNC_NAMES",
            "PLANT_QUIET", "PATH_PERIOD"]
 
-SETPOINTS_GRACE, SETPOINTS_WAIT = 1.0, 3.0
-"""Wall s after start-up during which the controller waits for /rto/setpoints before steering (see
-:meth:`SteeringLoop._await_setpoints`): always for the first, while an optimizer is known for the second."""
-PLANT_QUIET = 2.0
-"""Wall s: while /kite/state has several publishers, a sample off the timeline is another plant's (ignored) unless
-the timeline served has been silent this long (its plant is gone: a restart)."""
 PATH_PERIOD = 0.5
 """Wall s between two publications of the reference path (the latest setpoints are published, after the answer)."""
 
@@ -52,7 +49,7 @@ def _measurement(stamp: int, pos, vel, wind: float) -> SimpleNamespace:
                            psi_dot=vel[2], wind_ref=wind)
 
 
-class SteeringLoop(OptimizerSync):
+class SteeringLoop:
     """Answers plant samples with steering commands; follows setpoints and, optionally, the optimizer's sync.
 
     ``answer(stamp_ns, delta)`` sends a command, ``lap(stamp_ns, lap)`` a finished lap, ``path()`` publishes
@@ -62,6 +59,8 @@ class SteeringLoop(OptimizerSync):
     /rto/sync and /kite/state; ``setpoint_publishers()`` lists those of /rto/setpoints and ``setpoint_matched()``
     counts the writers the subscription is matched with (only asked when ``setpoint_source``, the one node whose
     setpoints apply, is set: :class:`~.setpoint_inbox.SetpointInbox`).
+    The parts it owns: ``optimizer_sync`` (:class:`~.optimizer_sync.OptimizerSync`; ``sync``: synchronization asked
+    for), ``inbox``, ``startup`` (the wait for the first setpoints), ``served`` (the plant served), ``timeline``.
     Raises :class:`SetpointError` for initial setpoints ``c0`` outside ``settings.box``.
     """
 
@@ -73,13 +72,14 @@ class SteeringLoop(OptimizerSync):
         self.controller = PathController(shared_model(), params, c0, settings)
         self.laps = LapDetector()
         self._answer, self._lap, self._path, self.log = answer, lap, path, logger
-        self._setpoint_sources, self._sync_sources, self._clock = setpoint_sources, sync_sources, clock
-        self._state_sources = state_sources
+        self._clock = clock
         self.reject = RejectLog(logger, clock=clock)
+        self.served = ServedPlant(state_sources, clock, self.reject)
+        self.optimizer_sync = OptimizerSync(sync, log=logger, reject=self.reject, clock=clock,
+                                            sync_sources=sync_sources)
         self.inbox = SetpointInbox(settings.box, logger, self.reject, clock, setpoint_source, setpoint_publishers,
                                    setpoint_matched)
         self._path_due, self._path_at = False, -math.inf
-        self._served_at = -math.inf       # wall time of the last sample of the timeline served
         self.timeline = Timeline()
         self._wind, self._tension, self._altitude = params.w_ref, math.nan, math.nan
         self._last_delta = 0.0
@@ -87,9 +87,16 @@ class SteeringLoop(OptimizerSync):
         self._pending = None              # (stamp, position, velocity) waiting for its wind reading
         self._jump = None                 # the same for a stale or future sample (plant restart or junk)
         self._restart = None              # (fresh controller, its answer) for a restart candidate
-        self._setpoints_in = False        # accepted setpoints yet (see _await_setpoints)
-        self._t_up = clock()
-        self._init_sync(sync)
+        self.startup = StartupWait(setpoint_sources, logger, clock)
+
+    @property
+    def sync(self) -> bool:
+        """Synchronization with the optimizer asked for (``sync_optimizer``)."""
+        return self.optimizer_sync.enabled
+
+    def synchronized(self) -> bool:
+        """True while samples wait for the optimizer's sync message."""
+        return self.optimizer_sync.synchronized()
 
     # -------------------------------------------------------------- measurements
     def wind_reading(self, stamp: int, v: float) -> None:
@@ -133,22 +140,22 @@ class SteeringLoop(OptimizerSync):
             self.reject("state", f"rejected state message: {err}")
             return
         if stamp == self.timeline.last or self.timeline.on(stamp):
-            self._served_at = self._clock()         # the timeline served is alive (see _other_plant)
+            self.served.heard()                      # the timeline served is alive
         if not self.synchronized():
             self._take_setpoints()                  # the sample boundary: the latest setpoints message, if any
         self.inbox.tick(self.controller.setpoints)
-        if not self._setpoints_in and self._await_setpoints():
+        if not self.startup.over and self.startup.waiting(self.controller.setpoints):
             return
-        if self._sync_held is not None:
-            held = self._sync_held[0]
-            if stamp == held:
+        waiting = self.optimizer_sync.held
+        if waiting is not None:
+            if stamp == waiting[0]:
                 return                              # re-published while the optimizer works on it
-            if held < stamp <= held + self.timeline.max_gap_ns:
-                self._release_unsynced("the next sample arrived first")
+            if waiting[0] < stamp <= waiting[0] + self.timeline.max_gap_ns:
+                self._answer_unsynced(self.optimizer_sync.release("the next sample arrived first"))
         held = (stamp, pos, vel)
         last = self.timeline.last
         off = stamp != last and not self.timeline.on(stamp)
-        if off and self._other_plant(stamp):
+        if off and self.served.other(stamp, last):
             return
         if self._jump is not None:
             self._reject_jump()
@@ -164,38 +171,6 @@ class SteeringLoop(OptimizerSync):
             self._process(held)
         else:
             self._pending = held
-
-    def _await_setpoints(self) -> bool:
-        """True (do not steer yet) while the optimizer's setpoints may still be on their way.
-
-        A controller started into a running loop (e.g. restarted after a crash) would otherwise steer the kite
-        towards its initial setpoints until the latched setpoints arrive. It waits while a setpoint publisher is
-        known, or for the first SETPOINTS_GRACE s after start-up (discovery), at most SETPOINTS_WAIT s; without
-        an optimizer it then flies its initial setpoints.
-        """
-        age = self._clock() - self._t_up
-        if age < SETPOINTS_WAIT and (age < SETPOINTS_GRACE or self._setpoint_sources() > 0):
-            self.log.info("waiting for the setpoints on /rto/setpoints before steering", throttle_duration_sec=2.0)
-            return True
-        if self._setpoint_sources() > 0:
-            self.log.warning(f"no valid setpoints on /rto/setpoints within {SETPOINTS_WAIT:g} s: flying "
-                             f"{fmt_setpoints(self.controller.setpoints)}")
-        self._setpoints_in = True                       # stop waiting (and asking the graph)
-        return False
-
-    def _other_plant(self, stamp: int) -> bool:
-        """True (ignore the sample) for a sample off the timeline while /kite/state has several publishers and the
-        timeline served is alive (a sample of it within PLANT_QUIET s): another plant's, not a restart."""
-        if self._clock() - self._served_at >= PLANT_QUIET:
-            return False
-        n = self._state_sources()
-        if n < 2:
-            return False
-        self.reject("other plant", f"rejected state message stamped {stamp * 1e-9:.3f} s at sim time "
-                                   f"{self.timeline.last * 1e-9:.3f} s: stale or future, and {n} publishers of "
-                                   "/kite/state while the kite served still flies (another plant on this domain?); "
-                                   "serving that one")
-        return True
 
     def _reject_jump(self) -> None:
         stamp = self._jump[0]
@@ -221,9 +196,12 @@ class SteeringLoop(OptimizerSync):
         if self._winds:
             self._drop_winds(stamp)
         m = _measurement(stamp, pos, vel, self._wind)
-        if self.sync and self._wait_for_sync(stamp):
-            self._sync_held = (stamp, m, pos, self._clock())
-            return
+        if self.sync:
+            entry = self.optimizer_sync.entry(stamp)
+            if entry is not None:
+                self._apply_sync(entry)
+            elif self.optimizer_sync.hold(stamp, m, pos):
+                return                              # until its /rto/sync (sync_message) or the watchdog
         self._steer(stamp, m, pos)
 
     def _steer(self, stamp: int, m, pos) -> None:
@@ -282,15 +260,42 @@ class SteeringLoop(OptimizerSync):
                                               f"time {stamp * 1e-9:.3f} s: stale or future (no state sample has "
                                               "that stamp)")
 
+    # ---------------------------------------------------------------------- sync
+    def sync_message(self, stamp: int, names, values) -> None:
+        """The optimizer has processed the sample ``stamp``: ``values`` are :data:`SYNC_NAMES`."""
+        entry = self.optimizer_sync.parse(names, values)
+        if entry is None or not self._stamp_near("sync", stamp):
+            return
+        held = self.optimizer_sync.arrived(stamp, entry, self.timeline.last)
+        if held is not None:
+            self._apply_sync(entry)
+            self._steer(*held[:3])
+
+    def watchdog(self) -> None:
+        """Call periodically (the node: every 0.05 s): releases a held sample when there is no optimizer at all."""
+        held = self.optimizer_sync.overdue()
+        if held is not None:
+            self._answer_unsynced(held)
+
+    def _apply_sync(self, entry) -> None:
+        c, updates = entry
+        if self.optimizer_sync.changes(c, updates, self.controller.setpoints.as_array().tolist()):
+            self._apply_setpoints(c)
+
+    def _answer_unsynced(self, held) -> None:
+        """Answer a sample released from its wait for the optimizer, with the latest setpoints."""
+        self._take_setpoints()
+        self._steer(*held[:3])
+
     # ----------------------------------------------------------------- setpoints
     def setpoints_message(self, names, values) -> None:
         """New setpoints (``names`` theta_0, A_phi, A_theta in any order, ``values`` rad): checked cheaply and
         kept; the latest is applied at the next sample (unsynchronized) or on the optimizer's sync message."""
         c = self.inbox.put(names, values)
-        if c is not None and self.synchronized() and not self._setpoints_in:
+        if c is not None and self.synchronized() and not self.startup.over:
             self.log.info(f"new setpoints {fmt_setpoints(Setpoints.from_array(c))} received; synchronized with the "
                           "optimizer: setpoints apply at the sample of its /rto/sync")
-            self._setpoints_in = True
+            self.startup.over = True
 
     def _take_setpoints(self) -> None:
         """The sample boundary: fly the latest setpoints message received since the last one, if any."""
@@ -298,9 +303,9 @@ class SteeringLoop(OptimizerSync):
         if c is None:
             return
         if self.timeline.last is not None and c == self.controller.setpoints.as_array().tolist():
-            self._setpoints_in = True           # flying them already
+            self.startup.over = True           # flying them already
         elif self._apply_setpoints(c):
-            self._setpoints_in = True
+            self.startup.over = True
 
     def publish_path_if_due(self) -> None:
         """Publish the reference path if the setpoints changed since it was last published and PATH_PERIOD s have
