@@ -48,6 +48,7 @@ CROSSINGS = {
     "rclpy in runtime": ("runtime/pace.py", "import rclpy", "never imports ROS 2"),
     "runtime in rto": ("rto/session.py", "from ..runtime import sample_join", "Layers"),
     "nodes in runtime": ("runtime/run_db.py", "from ..nodes import topics", "Layers"),
+    "the executables in tools": ("tools/progress.py", "from .. import executables", "Layers"),
 }
 
 

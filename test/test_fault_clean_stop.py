@@ -31,7 +31,7 @@ BAD = ("Traceback", "FATAL", "context is invalid", "Unable to convert call argum
 
 def _start(name, tmp, env):
     if name == "recorder":
-        return subprocess.Popen([sys.executable, "-m", "kite_rto.nodes.entry", "kite_record", "--out", str(tmp / "run.mcap")],
+        return subprocess.Popen([sys.executable, "-m", "kite_rto.executables", "kite_record", "--out", str(tmp / "run.mcap")],
                                 env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                 start_new_session=True, preexec_fn=DIE_WITH_PARENT)
     params = {"optimizer": {"db": str(tmp / "rto.sqlite"), "n_laps": 1, "settle_laps": 0},

@@ -16,7 +16,6 @@ __all__ = ["GraphRun", "NodeProcess", "isolated_ros_env", "node_command", "start
 SIGNALLED = False
 """Set by the demo's SIGINT/SIGTERM handler: an error raised inside rclpy after it is part of the stop, not a bug."""
 
-from ..nodes.entry import MODULES  # noqa: E402  (executable name -> module)
 _PR_SET_PDEATHSIG = 1
 
 
@@ -40,8 +39,8 @@ def _die_with_parent():
 
 def node_command(name: str, params: dict | None = None, namespace: str | None = None) -> list[str]:
     """The command line of ``ros2 run kite_rto <name> --ros-args [-r __ns:=<namespace>] -p k:=v ...`` for this
-    interpreter."""
-    cmd = [sys.executable, "-m", "kite_rto.nodes.entry", name, "--ros-args"]
+    interpreter (a process started through :mod:`kite_rto.executables`, not an import of it)."""
+    cmd = [sys.executable, "-m", "kite_rto.executables", name, "--ros-args"]
     if namespace not in (None, "/"):
         cmd += ["-r", f"__ns:={namespace}"]
     for k, v in (params or {}).items():
