@@ -38,7 +38,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from kite_rto.tools.graph import start_node, stop_node
+from kite_rto.testing.launch import start_node, stop_node
 
 from _table import print_table
 

@@ -11,7 +11,7 @@ status=$?
 wall=$(( $(date +%s) - start ))
 echo
 echo "fault suite: ${wall} s wall; rows in $log"
-if ! .venv/bin/python -m kite_rto.tools.fault_table "$log" --wall "$wall" && [ "$status" -eq 0 ]; then
+if ! .venv/bin/python -m kite_rto.testing.fault_table "$log" --wall "$wall" && [ "$status" -eq 0 ]; then
   status=1
 fi
 exit "$status"

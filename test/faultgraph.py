@@ -100,8 +100,8 @@ def node(label: str, name: str, env: dict, log_dir=None, params: dict | None = N
 
 
 def relay(label: str, env: dict, log_dir=None, **opts) -> Proc:
-    """``python -m kite_rto.tools.fault_relay --in .. --out .. --type ..`` (opts: in_, out, type, drop, ...)."""
-    cmd = [sys.executable, "-m", "kite_rto.tools.fault_relay"]
+    """``python -m kite_rto.testing.fault_relay --in .. --out .. --type ..`` (opts: in_, out, type, drop, ...)."""
+    cmd = [sys.executable, "-m", "kite_rto.testing.fault_relay"]
     for k, v in opts.items():
         k = k.rstrip("_").replace("_", "-")
         if v is True:

@@ -1,4 +1,4 @@
-"""Rows of the fault-injection table (``scripts/faults.sh`` -> ``python -m kite_rto.tools.fault_table DIR``).
+"""Rows of the fault-injection table (``scripts/faults.sh`` -> ``python -m kite_rto.testing.fault_table DIR``).
 
 Each fault test records one row per fault it injects: what the fault is, how it was injected, the measured
 outcome, experiments lost and unsafe setpoints (both must be 0), and whether the test's checks passed. When

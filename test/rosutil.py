@@ -8,8 +8,9 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
 # The same launcher the demo uses: ``ros2 run kite_rto <name>``'s entry point in its own process.
+from kite_rto.testing import launch as _launch
+from kite_rto.testing.launch import stop_node as stop  # noqa: E402,F401
 from kite_rto.tools import graph as _graph
-from kite_rto.tools.graph import stop_node as stop  # noqa: E402,F401
 
 DIE_WITH_PARENT = _graph._die_with_parent if _graph._PRCTL is not None else None
 """``preexec_fn`` for a test's subprocess: Linux sends it SIGTERM when the test process dies, even by SIGKILL, so
@@ -18,9 +19,9 @@ plant whose controller is gone re-publishes its sample until stopped). Start fro
 
 
 def start_node(name: str, params: dict | None = None, env=None, namespace: str | None = None):
-    """``kite_rto.tools.graph.start_node`` (``ros2 run kite_rto <name>``'s entry point in its own process group),
+    """``kite_rto.testing.launch.start_node`` (``ros2 run kite_rto <name>``'s entry point in its own process group),
     dying with the test process."""
-    return _graph.start_node(name, params, env, die_with_parent=True, namespace=namespace)
+    return _launch.start_node(name, params, env, die_with_parent=True, namespace=namespace)
 
 
 class Probe:

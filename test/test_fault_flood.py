@@ -99,7 +99,7 @@ def cpu_seconds(pid: int) -> float:
 
 
 def _flood(env, tmp_path, rate=FLOOD_HZ, duration=FLOOD_S, name="intruder") -> Proc:
-    return Proc(name, [sys.executable, "-m", "kite_rto.tools.setpoint_flood", "--rate", str(rate), "--duration",
+    return Proc(name, [sys.executable, "-m", "kite_rto.testing.setpoint_flood", "--rate", str(rate), "--duration",
                        str(duration), "--name", name], env, tmp_path)
 
 

@@ -1,6 +1,6 @@
 """Fault injection, the network (issue 7, items 4 and 6): lost and delayed messages, and DDS exposure.
 
-Losses and delays are injected by ``kite_rto.tools.fault_relay`` (seeded) put into the loop with ROS remapping:
+Losses and delays are injected by ``kite_rto.testing.fault_relay`` (seeded) put into the loop with ROS remapping:
 the controller publishes its steering on /kite/steering_raw and reads /kite/state_lossy; two relays forward them to
 /kite/steering and from /kite/state, dropping and delaying. Lockstep must recover every lost message by the
 plant's re-publish (no deadlock, trajectory unchanged); real time must keep flying, and the test measures how

@@ -1,8 +1,8 @@
-"""kite_rto.tools.fault_table: the table of the fault rows, written where the command runs (never next to the
+"""kite_rto.testing.fault_table: the table of the fault rows, written where the command runs (never next to the
 installed package)."""
 import json
 
-from kite_rto.tools.fault_table import main
+from kite_rto.testing.fault_table import main
 
 ROW = {"fault": "bad parameter: negative tether length", "injection": "plant --ros-args -p r:=-5.0",
        "outcome": "exit 2", "experiments_lost": 0, "unsafe_setpoints": 0, "passed": True}

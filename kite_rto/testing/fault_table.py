@@ -4,7 +4,7 @@
 test appends JSON lines ``{"fault", "injection", "outcome", "experiments_lost", "unsafe_setpoints", "passed"}`` to
 ``DIR/<test>.jsonl``. This tool prints the table and writes it, with how it was made, to ``docs/faults.md``::
 
-    python -m kite_rto.tools.fault_table DIR [--out docs/faults.md] [--wall 312] [--no-write]
+    python -m kite_rto.testing.fault_table DIR [--out docs/faults.md] [--wall 312] [--no-write]
 
 Exit code 0 when there is at least one row, every row passed and no row lost an experiment or applied an unsafe
 setpoint; 1 otherwise.
@@ -100,13 +100,13 @@ plant acted on. Every outcome cell is measured by the test that wrote it.
 Result: {text}.
 
 How each fault is injected and what the nodes do about it: [network.md](network.md) (exposure), the test files
-`test/test_fault_*.py`, the relay `kite_rto/tools/fault_relay.py` (message drop, delay and the crash pilot), the
-setpoint flood `kite_rto/tools/setpoint_flood.py` (a foreign publisher of /rto/setpoints).
+`test/test_fault_*.py`, the relay `kite_rto/testing/fault_relay.py` (message drop, delay and the crash pilot), the
+setpoint flood `kite_rto/testing/setpoint_flood.py` (a foreign publisher of /rto/setpoints).
 """
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m kite_rto.tools.fault_table", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m kite_rto.testing.fault_table", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("folder", help="KITE_RTO_FAULT_LOG directory of the run")
     ap.add_argument("--out", default=str(DEFAULT_OUT),

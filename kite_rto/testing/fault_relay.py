@@ -2,7 +2,7 @@
 
 Put it in a path with ROS remapping, e.g. the controller's steering through a lossy link::
 
-    python -m kite_rto.tools.fault_relay --in /kite/steering_raw --out /kite/steering \\
+    python -m kite_rto.testing.fault_relay --in /kite/steering_raw --out /kite/steering \\
         --type sensor_msgs/JointState --drop 0.1 --delay 0.05 --seed 0 &
     ros2 run kite_rto controller --ros-args -r /kite/steering:=/kite/steering_raw
 
@@ -53,7 +53,7 @@ def message_type(name: str):
 
 
 def parse_args(argv):
-    ap = argparse.ArgumentParser(prog="python -m kite_rto.tools.fault_relay", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m kite_rto.testing.fault_relay", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--in", dest="inp", required=True, help="topic to subscribe")
     ap.add_argument("--out", required=True, help="topic to publish")

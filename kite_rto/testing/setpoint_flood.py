@@ -6,7 +6,7 @@ inside the controller's default box and trackable), then exits and prints one li
 ``setpoint_flood summary: {json}`` with the count sent, the rate achieved and the system-clock times (ns, the
 clock of DDS source timestamps) of the first and last message::
 
-    python -m kite_rto.tools.setpoint_flood --rate 500 --duration 8 --name intruder
+    python -m kite_rto.testing.setpoint_flood --rate 500 --duration 8 --name intruder
 
 The node is named ``--name`` (default ``setpoint_flood``), so that the controller's warning about a second
 publisher names it. Publishing is paced on absolute wall times (``time.monotonic``): a late tick is sent at once,
@@ -40,7 +40,7 @@ def _degrees(text: str) -> list[float]:
 
 
 def parse_args(argv):
-    ap = argparse.ArgumentParser(prog="python -m kite_rto.tools.setpoint_flood", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m kite_rto.testing.setpoint_flood", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rate", type=float, default=500.0, help="messages per wall second, in (0, 10000]")
     ap.add_argument("--duration", type=float, default=8.0, help="wall s of flooding, in (0, 3600]")
