@@ -6,7 +6,7 @@ cd "$(dirname "$0")/.."
 ./scripts/bootstrap.sh || exit 1
 log=$(mktemp -d "${TMPDIR:-/tmp}/kite_rto_faults.XXXXXX")
 start=$(date +%s)
-KITE_RTO_FAULT_LOG="$log" .venv/bin/python -m pytest test/test_fault*.py -m faults -q "$@"
+KITE_RTO_FAULT_LOG="$log" .venv/bin/python -m pytest test/ros/test_fault*.py -m faults -q "$@"
 status=$?
 wall=$(( $(date +%s) - start ))
 echo

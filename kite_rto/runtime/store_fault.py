@@ -2,7 +2,7 @@
 
 :class:`DiskFull` raises SQLite's own disk-full error (``sqlite3.OperationalError("database or disk is full")``,
 what SQLITE_FULL gives) inside the write transaction, after its statements ran and just before it commits, so the
-transaction is rolled back by SQLite exactly as on a real full disk. ``test/test_gma_store.py`` also fills a real
+transaction is rolled back by SQLite exactly as on a real full disk. ``test/gma/test_gma_store.py`` also fills a real
 database to its page limit (``PRAGMA max_page_count``) to show that SQLite's own SQLITE_FULL ends the same way.
 """
 from __future__ import annotations

@@ -236,6 +236,6 @@ def test_demo_discovery_stays_on_localhost(request):
         assert default["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
         assert 1 <= int(default["ROS_DOMAIN_ID"]) <= 100
         assert opened == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "ROS_DOMAIN_ID": "42", "ROS_STATIC_PEERS": None}
-        doc = open(os.path.join(os.path.dirname(__file__), "..", "docs", "network.md")).read()
+        doc = open(os.path.join(os.path.dirname(__file__), "..", "..", "docs", "network.md")).read()
         for needle in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_DOMAIN_ID", "SUBNET", "ROS_STATIC_PEERS", "LOCALHOST"):
             assert needle in doc

@@ -16,7 +16,7 @@ from kite_rto.tools.graph import node_command
 
 pytestmark = [pytest.mark.ros, pytest.mark.faults]
 
-CONFIG = Path(__file__).resolve().parents[1] / "config" / "kite_rto.yaml"
+CONFIG = Path(__file__).resolve().parents[2] / "config" / "kite_rto.yaml"
 LOG_ENV = "KITE_RTO_FAULT_LOG"
 
 # (fault, node, --ros-args arguments, substrings expected on stderr); "{bad_yaml}" is a params file of the shipped

@@ -27,7 +27,7 @@ from kite_rto.tools.graph import node_command
 
 from rosutil import DIE_WITH_PARENT, Probe, start_node, stop
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "config" / "kite_rto.yaml"
 pytestmark = pytest.mark.ros
 

@@ -3,7 +3,7 @@ from pathlib import Path
 
 from kite_rto.tools.config_yaml import render
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_config_file_is_generated_from_the_declared_parameters():

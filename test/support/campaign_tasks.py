@@ -1,4 +1,4 @@
-"""Closed-form tasks for the campaign executor's tests (importable by Dask workers: test/ is on their path)."""
+"""Closed-form tasks for the campaign executor's tests (importable by Dask workers: test/support/ is on their path)."""
 import os
 import time
 import uuid

@@ -22,7 +22,7 @@ from faultgraph import node, stop_all
 from faultlog import fault_row
 from rosutil import Probe
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 from bench_rate import run_rate  # noqa: E402
 from bench_stall import log_stamp, run_stalls  # noqa: E402
 

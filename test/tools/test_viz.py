@@ -23,7 +23,7 @@ from rosutil import DIE_WITH_PARENT, Probe, start_node, stop
 from ws_client import FoxgloveWsClient
 
 PY = sys.executable
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_marker_array_carries_the_scene():

@@ -17,7 +17,7 @@ from campaign_tasks import closed_form_tasks, expected, held
 from kite_rto.campaign.executor import ResultCache, Task, execute, pending
 from kite_rto.tools import graph
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DASK = str(Path(sys.executable).with_name("dask"))
 
 
@@ -33,7 +33,7 @@ def local_client():
 
 
 def _start(cmd, log: Path):
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), str(ROOT / "test")]))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), str(ROOT / "test" / "support")]))
     return subprocess.Popen(cmd, env=env, stdout=open(log, "wb"), stderr=subprocess.STDOUT, start_new_session=True,
                             preexec_fn=graph._die_with_parent if graph._PRCTL is not None else None)
 
