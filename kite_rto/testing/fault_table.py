@@ -20,7 +20,7 @@ from pathlib import Path
 __all__ = ["load_rows", "markdown_table", "main"]
 
 FIELDS = ("fault", "injection", "outcome", "experiments_lost", "unsafe_setpoints", "passed")
-# Files in the order of the issue's items (bad parameters, bad messages, node loss, message loss, crash, exposure)
+# Files in the fault suite's order (bad parameters, bad messages, node loss, message loss, crash, exposure)
 ORDER = ("param", "message", "node", "network", "loss", "crash", "exposure")
 # Relative to the working directory (scripts/faults.sh runs from the clone's root), never to this file: an installed
 # package must not write next to itself in site-packages.
@@ -28,14 +28,14 @@ DEFAULT_OUT = Path("docs") / "faults.md"
 
 
 def _rank(path: Path) -> tuple:
-    """Files of one test module together, the modules in the issue's order; rows in the order they were run."""
+    """Files of one test module together, the modules in ORDER; rows in the order they were run."""
     module = path.stem.lower().split(".py")[0]
     rank = next((i for i, key in enumerate(ORDER) if key in module), len(ORDER))
     return (rank, module, path.stat().st_mtime)
 
 
 def load_rows(folder) -> list[dict]:
-    """Every row of every ``*.jsonl`` file in ``folder`` (files in the issue's order, rows as written)."""
+    """Every row of every ``*.jsonl`` file in ``folder`` (files in ORDER, rows as written)."""
     rows = []
     for path in sorted(Path(folder).glob("*.jsonl"), key=_rank):
         for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):

@@ -1,4 +1,4 @@
-"""Setpoint flood: a foreign publisher of /rto/setpoints, for fault-injection tests (issue 18).
+"""Setpoint flood: a foreign publisher of /rto/setpoints, for fault-injection tests.
 
 Publishes valid setpoints on /rto/setpoints (reliable, transient local: the controller's QoS) at ``--rate`` Hz for
 ``--duration`` wall seconds, alternating between ``--a`` and ``--b`` (degrees ``theta_0,A_phi,A_theta``; both
