@@ -27,7 +27,7 @@ import subprocess
 import sys
 import time
 
-from kite_rto.tools.graph import start_node, stop_node
+from kite_rto.testing.launch import start_node, stop_node
 
 from _table import print_table
 

@@ -15,7 +15,7 @@ and the kite crashes (``kite crashed`` lines of the plant) from the SIGSTOP unti
 
 Usage: ``python benchmarks/bench_stall.py [--stalls 20] [--stall 3] [--settle 5] [--rate-factor 1]``. Prints one
 line per stall and a markdown table ``benchmark | value | target | met``; ``main()`` returns its rows,
-:func:`run_stalls` the measurements (``test/test_fault_plant_side.py`` runs it with 3 stalls).
+:func:`run_stalls` the measurements (``test/ros/test_fault_plant_side.py`` runs it with 3 stalls).
 Target: steering back within 0.2 s of the SIGCONT, no crash in 20 stalls.
 """
 from __future__ import annotations
@@ -38,7 +38,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from kite_rto.tools.graph import start_node, stop_node
+from kite_rto.testing.launch import start_node, stop_node
 
 from _table import print_table
 

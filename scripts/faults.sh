@@ -6,12 +6,12 @@ cd "$(dirname "$0")/.."
 ./scripts/bootstrap.sh || exit 1
 log=$(mktemp -d "${TMPDIR:-/tmp}/kite_rto_faults.XXXXXX")
 start=$(date +%s)
-KITE_RTO_FAULT_LOG="$log" .venv/bin/python -m pytest test/test_fault*.py -m faults -q "$@"
+KITE_RTO_FAULT_LOG="$log" .venv/bin/python -m pytest test/ros/test_fault*.py -m faults -q "$@"
 status=$?
 wall=$(( $(date +%s) - start ))
 echo
 echo "fault suite: ${wall} s wall; rows in $log"
-if ! .venv/bin/python -m kite_rto.tools.fault_table "$log" --wall "$wall" && [ "$status" -eq 0 ]; then
+if ! .venv/bin/python -m kite_rto.testing.fault_table "$log" --wall "$wall" && [ "$status" -eq 0 ]; then
   status=1
 fi
 exit "$status"

@@ -14,7 +14,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / ".importlinter"
-CONTRACTS = 4
+CONTRACTS = 5
 LINT = "from importlinter.cli import lint_imports_command; lint_imports_command()"
 
 
@@ -45,6 +45,12 @@ CROSSINGS = {
     "rclpy in campaign": ("campaign/tasks.py", "import rclpy", "never imports ROS 2"),
     "campaign in rto": ("rto/baselines.py", "from ..campaign import scenarios", "Layers"),
     "nodes in campaign": ("campaign/summary.py", "from ..nodes import topics", "Layers"),
+    "rclpy in runtime": ("runtime/pace.py", "import rclpy", "never imports ROS 2"),
+    "runtime in rto": ("rto/session.py", "from ..runtime import sample_join", "Layers"),
+    "nodes in runtime": ("runtime/run_db.py", "from ..nodes import topics", "Layers"),
+    "the test rig in nodes, inside a function": ("nodes/topics.py", "def _late():\n    from ..testing import launch",
+                                                 "never imported by the runtime path"),
+    "the executables in tools": ("tools/progress.py", "from .. import executables", "Layers"),
 }
 
 

@@ -51,7 +51,7 @@ class ShapeBox:
     In setpoints the trackable set is a curved band; in ``aspect`` it is nearly a slab: the lobe-end turn
     depends on the aspect only, and the top/bottom turns loosen as the figure grows. The default
     (theta_0 30-40 deg, A_phi 42-62 deg, aspect 0.16-0.22, i.e. A_theta 5.5-10.6 deg) passes
-    :func:`validate_setpoints` on a 7x7x7 grid with the default margin (``test/test_path.py``); its bounding
+    :func:`validate_setpoints` on a 7x7x7 grid with the default margin (``test/flight/test_path.py``); its bounding
     box in setpoints is the default :class:`SetpointBox`.
     """
 

@@ -65,8 +65,8 @@ class HistoryStore:
         path: database file (created at the first write if missing); ``":memory:"`` for tests.
         fault: test hook, an object with ``before_commit(kind)`` called inside every write transaction just before
             it commits (``kind``: ``"start"``, ``"experiment"`` or ``"iteration"``, see :meth:`save_progress`); an
-            exception it raises rolls the transaction back like a real failure (e.g.
-            :class:`~kite_rto.gma.store_fault.DiskFull`).
+            exception it raises rolls the transaction back like a real failure (e.g. an ``OSError`` of a full
+            disk).
 
     Raises:
         StoreError: the file exists but is not a readable history (it is left as it was).

@@ -5,7 +5,7 @@ gets the current setpoints); answers every ``/kite/state`` sample on ``/kite/ste
 (the lockstep handshake); publishes the reference path (nav_msgs/Path, for RViz/Foxglove) and per-lap statistics.
 With ``sync_optimizer:=true`` (lockstep) it answers a sample only after the optimizer's ``/rto/sync`` message for it
 and takes the setpoints from there, so a setpoint change takes effect at the same sample as in the pure runner.
-All logic is :class:`kite_rto.flight.steering_loop.SteeringLoop` (join, timeline, restart, setpoints coalesced per
+All logic is :class:`kite_rto.runtime.steering_loop.SteeringLoop` (join, timeline, restart, setpoints coalesced per
 sample, optimizer sync) around :class:`kite_rto.flight.controller.PathController` and
 :class:`kite_rto.flight.laps.LapDetector`. Every 0.5 s wall it looks at the graph: several publishers of an input
 (two plants, a foreign setpoint source) are warned about by name (:class:`.graph_watch.InputWatch`).
@@ -24,9 +24,9 @@ from sensor_msgs.msg import JointState
 
 from ..flight.controller import ControllerSettings, PathController
 from ..flight.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, Setpoints, SetpointError
-from ..flight.sources import parse_source
-from ..flight.steering_loop import SteeringLoop, fmt_setpoints
 from ..kite.params import KiteParams, ParameterError
+from ..runtime.sources import parse_source
+from ..runtime.steering_loop import SteeringLoop, fmt_setpoints
 from .graph_watch import InputWatch, publishers_of
 from .interface import LAP_HISTORY, LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
 from .peer_check import PlantAgreement

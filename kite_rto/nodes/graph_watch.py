@@ -1,4 +1,4 @@
-"""The ROS graph as the pure core sees it: the publishers of a topic as :class:`~kite_rto.flight.sources.Publisher`
+"""The ROS graph as the pure core sees it: the publishers of a topic as :class:`~kite_rto.runtime.sources.Publisher`
 (fully qualified node name and endpoint GID), and the controller's look at its inputs (:class:`InputWatch`).
 
 rclpy offers no per-message sender to a subscription callback spun by the events executor (a callback taking the
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from rclpy.clock import Clock, ClockType
 
-from ..flight.sources import Publisher, SourceWatch, node_name
+from ..runtime.sources import Publisher, SourceWatch, node_name
 from .topics import CLOCK, SETPOINTS, STATE, SYNC
 
 __all__ = ["publishers_of", "controller_inputs", "InputWatch", "GRAPH_PERIOD"]
@@ -43,8 +43,8 @@ def controller_inputs(source: str | None, sync: bool) -> dict:
 class InputWatch:
     """The controller's look at the graph every :data:`GRAPH_PERIOD` wall s (a steady timer on ``node``).
 
-    Warns, throttled, while an input has several publishers (:class:`~kite_rto.flight.sources.SourceWatch`), lets
-    ``loop`` (the :class:`~kite_rto.flight.steering_loop.SteeringLoop`) publish a pending path or setpoint summary,
+    Warns, throttled, while an input has several publishers (:class:`~kite_rto.runtime.sources.SourceWatch`), lets
+    ``loop`` (the :class:`~kite_rto.runtime.steering_loop.SteeringLoop`) publish a pending path or setpoint summary,
     and calls ``resubscribe()`` once the configured setpoint source publishes /rto/setpoints alone again after
     messages were ignored (a new subscription gets its latched setpoints).
     """

@@ -24,7 +24,7 @@ Storage (docs/storage.md): a damaged database, one that holds a run while ``resu
 settings stops the node at start-up with exit code 2 (the file untouched); a database that stays unwritable for
 ``storage_timeout`` s stops it with exit code 3 (:data:`STORAGE_EXIT`), nothing stored lost. Test hook:
 ``KITE_RTO_TEST_STORE_FULL=KIND:N[:ATTEMPTS]`` (:data:`STORE_FULL_ENV`) makes the database's writes fail like a
-full disk (:class:`~kite_rto.gma.store_fault.DiskFull`).
+full disk (:class:`~kite_rto.runtime.store_fault.DiskFull`).
 """
 from __future__ import annotations
 
@@ -43,14 +43,14 @@ from std_msgs.msg import UInt32
 
 from ..flight.path import Setpoints
 from ..gma import GMA
-from ..gma.store_fault import DiskFull
 from ..kite.params import KiteParams, ParameterError
 from ..rto.builder import gma_directions, lap_problem, make_gma, model_only_optimum
 from ..gma import StoreError
-from ..rto.operator_log import transition_event, was_paused
-from ..rto.optimizer_run import OptimizerRun
-from ..rto.run_db import SETTINGS_KEY, RunDatabaseError, open_run_database
 from ..rto.session import RTOSession
+from ..runtime.operator_log import transition_event, was_paused
+from ..runtime.optimizer_run import OptimizerRun
+from ..runtime.run_db import SETTINGS_KEY, RunDatabaseError, open_run_database
+from ..runtime.store_fault import DiskFull
 from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
 from .optimizer_params import PARAMS, cross_check, run_settings, settings_from_params
 from .parameters import declare_params

@@ -9,7 +9,7 @@ kite flies never depends on how fast the machine is), and flies neutral, keeping
 and ``command_timeout`` s have passed (the controller left, or DDS dropped a killed or frozen one); this starts after
 the first command, so a run does not depend on how long the controller takes to start.
 Real time also measures the lag of the steering commands and lowers a ``rate_factor`` the machine cannot hold
-(:mod:`kite_rto.kite.pace`). One plant per graph: a plant refuses to start where another one runs, and warns when a
+(:mod:`kite_rto.runtime.pace`). One plant per graph: a plant refuses to start where another one runs, and warns when a
 second publisher of its topics appears (:mod:`kite_rto.nodes.plant_guard`).
 """
 from __future__ import annotations
@@ -24,14 +24,14 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import UInt32
 
-from ..kite.pace import RealtimePacer
 from ..kite.plant import KitePlant
+from ..runtime.pace import RealtimePacer
+from ..runtime.sample_join import RejectLog
 from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, finite_floats, ns_to_stamp, stamp_to_ns
 from .parameters import declare_params
 from .plant_config import PARAMS, config_from_params
 from .plant_guard import WATCH_PERIOD, SecondPublisherWatch, refuse_if_another_plant
 from .spin import request_exit, run_node
-from ..flight.sample_join import RejectLog
 from .topics import CLOCK, CRASHES, POSITION, STATE, STEERING, TENSION, WIND
 
 FLUSH_TIMEOUT = 60.0

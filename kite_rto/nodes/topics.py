@@ -6,7 +6,7 @@ each other (docs/network.md *Two kites in one domain*). In the root namespace th
 ``/kite/state``, ``/clock``. :func:`graph_name` is the name as seen inside a graph (``/kite/state``, whatever its
 namespace): what the tools print, take on their command line and name MCAP channels by.
 """
-from ..flight.steering_loop import SYNC_NAMES
+from ..runtime.optimizer_sync import SYNC_NAMES
 
 __all__ = ["CLOCK", "STATE", "POSITION", "TENSION", "WIND", "STEERING", "SETPOINTS", "STATUS", "SYNC", "SYNC_NAMES",
            "REFERENCE_PATH", "LAPS", "CRASHES", "WIND_ESTIMATE", "MARKERS", "MANUAL_SETPOINTS", "ALL", "graph_name", "relative"]

@@ -10,13 +10,12 @@ import sys
 import threading
 import time
 
-__all__ = ["GraphRun", "NodeProcess", "isolated_ros_env", "node_command", "start_node", "start_process",
-           "stop_node", "stop_all", "close_graph", "stopped_by_signal"]
+__all__ = ["GraphRun", "NodeProcess", "isolated_ros_env", "node_command", "start_process", "stop_all", "close_graph",
+           "stopped_by_signal"]
 
 SIGNALLED = False
 """Set by the demo's SIGINT/SIGTERM handler: an error raised inside rclpy after it is part of the stop, not a bug."""
 
-from ..nodes.entry import MODULES  # noqa: E402  (executable name -> module)
 _PR_SET_PDEATHSIG = 1
 
 
@@ -40,8 +39,8 @@ def _die_with_parent():
 
 def node_command(name: str, params: dict | None = None, namespace: str | None = None) -> list[str]:
     """The command line of ``ros2 run kite_rto <name> --ros-args [-r __ns:=<namespace>] -p k:=v ...`` for this
-    interpreter."""
-    cmd = [sys.executable, "-m", "kite_rto.nodes.entry", name, "--ros-args"]
+    interpreter (a process started through :mod:`kite_rto.executables`, not an import of it)."""
+    cmd = [sys.executable, "-m", "kite_rto.executables", name, "--ros-args"]
     if namespace not in (None, "/"):
         cmd += ["-r", f"__ns:={namespace}"]
     for k, v in (params or {}).items():
@@ -55,25 +54,6 @@ def start_process(cmd: list, env=None, die_with_parent: bool = False) -> subproc
     return subprocess.Popen(cmd, env=env or dict(os.environ), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True, start_new_session=True,
                             preexec_fn=_die_with_parent if die_with_parent and _PRCTL is not None else None)
-
-
-def start_node(name: str, params: dict | None = None, env=None, die_with_parent: bool = False,
-               namespace: str | None = None) -> subprocess.Popen:
-    """Start a node (in ``namespace``, default the root) in its own process group, output (stdout + stderr) on a
-    text pipe."""
-    return start_process(node_command(name, params, namespace), env, die_with_parent)
-
-
-def stop_node(proc: subprocess.Popen, timeout: float = 10.0) -> str:
-    """Ctrl-C the node (SIGINT), wait, kill its process group if it hangs; return its remaining output."""
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-    try:
-        out, _ = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        out, _ = proc.communicate()
-    return out or ""
 
 
 def isolated_ros_env(domain_id: int | None = None) -> dict:

@@ -1,6 +1,6 @@
 """The main job's progress lines: the live line (in place on a terminal), the ETA text and the GMA run's progress.
 
-Pure formatting and timing: no ROS, so the lines are unit-tested without a graph (``test/test_demo_cli.py``).
+Pure formatting and timing: no ROS, so the lines are unit-tested without a graph (``test/tools/test_demo_cli.py``).
 """
 from __future__ import annotations
 
