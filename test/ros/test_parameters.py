@@ -122,7 +122,10 @@ def test_every_parameter_has_a_description_and_numbers_have_units_and_ranges():
         assert len({s.name for s in specs}) == len(specs), node
         for s in specs:
             assert s.description, (node, s.name)
-            if isinstance(s.default, float) or isinstance(s.default, list):
+            if isinstance(s.default, list) and s.default and isinstance(s.default[0], str):
+                assert set(s.default) <= set(s.choices), (node, s.name)
+                s.check(s.default)
+            elif isinstance(s.default, float) or isinstance(s.default, list):
                 assert s.unit and s.low is not None and s.high is not None, (node, s.name)
                 s.check(s.default)
             elif isinstance(s.default, int) and not isinstance(s.default, bool):
