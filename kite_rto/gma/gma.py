@@ -19,11 +19,10 @@ from ._nlp import ModifiedNLP, NLPPair, RealizationNLP
 from .gradients import FiniteDifferenceGradient, GradientEstimator, PlantPoint
 from .mechanism import Iteration, Mechanism, Solution
 from .model_side import ModelSide
-from .modifier_filter import build_filters
 from .modifiers import Decision, ModelRealization, Modifiers
 from .problem import ModelProblem
 from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
-from .settings import MECHANISMS, GMASettings
+from .settings import GMASettings
 
 __all__ = ["GMA"]
 
@@ -54,7 +53,7 @@ class GMA:
         self.gradient = gradient if gradient is not None else FiniteDifferenceGradient(0.01 * self._width)
         self._nlps = NLPPair(problem, s.model)
         self._model = ModelSide(problem, self._nlps, s.model)
-        self.mechanisms: list[Mechanism] = _build(s, problem) + list(mechanisms)
+        self.mechanisms: list[Mechanism] = s.build(problem) + list(mechanisms)
         if history is not None:
             self.history = deepcopy(history)
             self._resume()
@@ -325,23 +324,6 @@ class GMA:
         if it.decision is Decision.STEP and bool(np.all(np.abs(unscaled) <= self.settings.tol_c * self._width)):
             it.decision, detail = Decision.CONVERGED, ""
         return c_next, detail
-
-
-def _build(settings: GMASettings, problem: ModelProblem) -> list[Mechanism]:
-    """The active mechanisms, in the order of :data:`~kite_rto.gma.settings.MECHANISMS` (the two modifier filters
-    are one mechanism)."""
-    out = []
-    for name in MECHANISMS:
-        if name == "modifier_filter":
-            m = build_filters(settings.modifier_filter, settings.noise_filter, problem)
-        elif name == "noise_filter":
-            continue
-        else:
-            sub = getattr(settings, name)
-            m = None if sub is None else sub.build(problem)
-        if m is not None:
-            out.append(m)
-    return out
 
 
 def _plant_point(request: ExperimentRequest, result: ExperimentResult) -> PlantPoint:

@@ -16,7 +16,7 @@ import numpy as np
 from ._checks import Scalar, check_choice, check_int, check_range
 from .bound_hold import BoundHold
 from .model_secant import ModelSecant
-from .modifier_filter import ModifierFilter, NoiseFilter
+from .modifier_filter import ModifierFilter, NoiseFilter, build_filters
 from .plain import from_plain, to_plain
 from .safe_step import SafeStep
 from .trust_region import TrustRegion
@@ -129,6 +129,14 @@ class GMASettings:
         """The effort of iteration ``k``'s experiments (``effort_schedule``'s multiplier; 1 without one)."""
         sched = self.effort_schedule
         return sched[min(k, len(sched) - 1)] if sched else 1.0
+
+    def build(self, problem) -> list:
+        """The active mechanisms for ``problem``, in the order of :data:`MECHANISMS` (the two modifier filters are
+        one mechanism)."""
+        out = [build_filters(self.modifier_filter, self.noise_filter, problem)]
+        out += [sub.build(problem) for name in MECHANISMS if name not in ("modifier_filter", "noise_filter")
+                if (sub := getattr(self, name)) is not None]
+        return [m for m in out if m is not None]
 
     def to_dict(self) -> dict:
         """Plain-JSON form: sub-objects as dicts (``None`` when off), sequences as lists, ``inf`` as ``"inf"``."""
