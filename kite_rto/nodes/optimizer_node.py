@@ -3,7 +3,10 @@
 Drives :class:`kite_rto.rto.session.RTOSession` (the same per-sample logic as the pure runner): subscribes the
 plant's measurements (joined by stamp), runs GMA's nominal and perturbation experiments, publishes
 ``/rto/setpoints`` (reliable + transient-local) and ``/rto/status`` (diagnostic_msgs), and writes every finished
-experiment and iteration to an SQLite database, from which a restarted optimizer resumes.
+experiment and iteration to an SQLite database, from which a restarted optimizer resumes. The run's description
+(:class:`~kite_rto.rto.run.RunDescription`: its settings and plant) is stored there (meta key ``run``) and published
+on ``/rto/run`` (latched JSON), with the plant once the plant's ``/kite/plant_config`` arrives (a resumed run keeps
+the stored one until then).
 
 After each plant sample it has processed it publishes ``/rto/sync`` (sensor_msgs/JointState stamped with the sample's
 time: the setpoints in force, rad, and ``updates``, the number of setpoint messages this optimizer has published). A
@@ -40,12 +43,14 @@ from ..flight.path import Setpoints
 from ..gma import GMA
 from ..kite.params import ParameterError
 from ..rto.builder import make_gma
+from ..rto.run import RUN_KEY, RunDescription
 from ..gma import StoreError
 from ..rto.session import RTOSession
 from ..runtime.gma_build import GMABuild
 from ..runtime.operator_log import transition_event, was_paused
 from ..runtime.optimizer_run import OptimizerRun
 from ..runtime.run_db import SETTINGS_KEY, RunDatabaseError, open_run_database
+from ..runtime.run_description import stored_description
 from ..runtime.store_fault import DiskFull
 from .interface import RELIABLE_10
 from .optimizer_params import PARAMS, cross_check, run_settings, settings_from_params
@@ -234,19 +239,25 @@ class OptimizerNode(LifecycleNode):
             self.get_logger().fatal(f"start-up failed: {built!r}")
             return request_exit(self, 1)
         self.gma, v, history = built, self.p, self._history
+        description, note = stored_description(history.meta, self.settings) if history is not None else \
+            (RunDescription(self.settings), "")
+        if note:
+            self.get_logger().warning(note)
         self.wire = wire = RunWire(self)
         self.run = OptimizerRun(self.gma, RTOSession(self.gma, self.settings.experiment, self.settings.max_repeats),
                                 self.store, self.settings.box.setpoint_box(), n_iter=v["n_iter"],
                                 logger=self.get_logger(), send_setpoints=wire.setpoints, sync=wire.sync,
                                 status=self.publish_status, finished=self.finished,
                                 storage_lost=lambda: request_exit(self, STORAGE_EXIT),
-                                storage_timeout=v["storage_timeout"], run_meta={SETTINGS_KEY: run_settings(v)})
+                                storage_timeout=v["storage_timeout"], description=description,
+                                run_meta={SETTINGS_KEY: run_settings(v), RUN_KEY: description.to_dict()})
         wire.attach(self.run)
         first = self.gma.next_request()
         if history is not None:
             self.get_logger().info(f"resumed from {v['db']}: {len(history.experiments)} experiments, "
                                    f"{len(history.iterations)} iterations")
         self.run.begin()                     # stores a new run's start first; publishes nothing until it is stored
+        wire.description(description)
         if self.state != "active":
             self.run.pause()                 # configured, not activated: hold the first (or the paused) setpoints
         self.get_logger().info(f"optimizer up ({self.state}): first experiment {first.request_id}")

@@ -7,6 +7,9 @@ experiment and iteration to a :class:`~kite_rto.gma.HistoryStore`, and reports t
 the status changed, ``finished()`` once ``n_iter`` iterations are done, ``storage_lost()`` when the database stayed
 unwritable for ``storage_timeout`` s. :class:`kite_rto.nodes.optimizer_node` turns these into messages.
 
+The run's description (:class:`~kite_rto.rto.run.RunDescription`) is stored again with the plant's configuration
+when the plant publishes it (:meth:`OptimizerRun.plant_config`; run data, which a failed write does not hold).
+
 Nothing is lost when storage fails. What GMA holds in memory and the store lacks is written in one transaction (a
 run's start; finished experiments; the experiment that completes an iteration together with that iteration's
 record and the next requests; :class:`~kite_rto.runtime.run_persistence.RunPersistence`) before any setpoint that
@@ -26,6 +29,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -33,9 +37,11 @@ from ..flight.path import SetpointError, validate_setpoints
 from ..flight.shape import setpoints_from_shape, shape_from_setpoints
 from ..gma import StoreError
 from ..kite.params import KiteParams
+from ..rto.run import RUN_KEY
 from .operator_log import MANUAL
+from .run_description import plant_from_json
 from .run_persistence import RunPersistence
-from .run_status import degrees, shape_degrees, status_values
+from .run_status import degrees, shape_degrees
 from .sample_join import RejectLog, SampleJoin, reading_error, state_values
 
 __all__ = ["OptimizerRun"]
@@ -44,19 +50,21 @@ __all__ = ["OptimizerRun"]
 class OptimizerRun:
     """GMA on the flying kite, one plant reading at a time; ``logger`` has ``info``/``warning``/``error``.
 
-    ``run_meta``: run data written with a new run's start (e.g. the settings it was created with);
+    ``run_meta``: run data written with a new run's start (e.g. the settings it was created with, its description);
+    ``description``: the run's :class:`~kite_rto.rto.run.RunDescription` (None: :meth:`plant_config` refuses);
     ``storage_timeout``: wall seconds of failed writes after which the run gives up (``storage_lost()``);
     ``clock``: wall time in s (monotonic), for the retry period and the timeout.
     """
 
     def __init__(self, gma, session, store, box, *, n_iter: int, logger, send_setpoints, sync, status, finished,
                  storage_lost=lambda: None, storage_timeout: float = 60.0, run_meta: dict | None = None,
-                 clock=time.monotonic):
+                 description=None, clock=time.monotonic):
         self.gma, self.session, self.store, self.box = gma, session, store, box
         self.n_iter = n_iter
         self.log = logger
         self._send, self._sync, self._status, self._finished = send_setpoints, sync, status, finished
         self._storage_lost = storage_lost
+        self.description = description
         self.persist = RunPersistence(gma, store, logger, run_meta=run_meta, storage_timeout=storage_timeout,
                                       clock=clock)
         self.reject = RejectLog(logger)
@@ -74,11 +82,6 @@ class OptimizerRun:
         self._moved = False                 # an operator moved the open iteration while paused
         self.manual_note = ""               # the last manual setpoints: accepted or why refused
 
-    @property
-    def storage_error(self) -> str:
-        """The last database write error while something is unstored ("" when everything is stored)."""
-        return self.persist.error
-
     def begin(self) -> None:
         """Store what memory holds and the store lacks (a new run's start; an iteration GMA completed again on
         resume), then publish the first experiment's setpoints; while that write fails nothing is published (the
@@ -88,9 +91,33 @@ class OptimizerRun:
 
     def tick(self) -> None:
         """Wall-clock timer (the node: 1 Hz): retry a failed write and check ``storage_timeout`` even when no
-        sample arrives."""
-        if self.persist.failing and not self.done:
+        sample arrives; write waiting run data (also once the run has ended)."""
+        if (self.persist.failing and not self.done) or self.persist.meta_waiting:
             self._store()
+
+    def plant_config(self, text: str):
+        """The plant's configuration, ``text`` = JSON as the plant publishes it: the run's description with it is
+        stored (at once, or with a later write while the database cannot be written) and returned. None when the
+        description already names that plant, or when ``text`` is not a plant configuration (rejected: a throttled
+        warning naming what is wrong; the run goes on)."""
+        old = self.description
+        if old is None:
+            raise ValueError("OptimizerRun.plant_config: this run keeps no description (made with description=None)")
+        try:
+            plant = plant_from_json(text)
+        except ValueError as err:
+            return self.reject("plant_config", f"rejected plant configuration {err}")
+        if plant == old.plant:
+            return None
+        self.description = replace(old, plant=plant)
+        self.persist.add_meta({RUN_KEY: self.description.to_dict()})
+        self._store()
+        if old.plant is None:
+            self.log.info("the run's description now names the plant's configuration")
+        else:
+            self.log.warning("the plant's configuration changed during the run (a plant restarted with other "
+                             "parameters?): the run's description now names the new one")
+        return self.description
 
     # ------------------------------------------------------------ measurements
     def state_reading(self, stamp: int, names, position, velocity) -> None:
@@ -255,7 +282,7 @@ class OptimizerRun:
         if self.done:
             return f"the run has ended ({self.phase})"
         if self.persist.failing or self._held:
-            return f"the database cannot be written ({self.storage_error})"
+            return f"the database cannot be written ({self.persist.error})"
         try:
             c = np.asarray(c, dtype=float)
             if c.shape != (3,):
@@ -319,7 +346,3 @@ class OptimizerRun:
         self.c_published = [float(x) for x in c]
         self._send(self.c_published)
         self.updates += 1
-
-    def status_values(self) -> dict:
-        """The status as key -> value (:func:`~kite_rto.runtime.run_status.status_values`)."""
-        return status_values(self)

@@ -7,6 +7,11 @@ experiments, the iterations they completed with the next requests. What is store
 request id and iteration number, so an iteration that GMA completes again on resume (its last experiment stored,
 its record not) is written too. After a failure the write is tried again at most every :data:`RETRY_PERIOD` s;
 once ``storage_timeout`` s have passed since the first failure, a failed try gives up.
+
+Run data that comes during the run (:meth:`RunPersistence.add_meta`: the run's description once the plant has said
+what it is) is written at the next :meth:`RunPersistence.write`: with the records when some are unstored, else
+alone. A failed write of run data alone keeps it in memory and is tried again (at most every :data:`RETRY_PERIOD`
+s, and with the next records); the run goes on meanwhile: it holds nothing it would publish.
 """
 from __future__ import annotations
 
@@ -60,11 +65,24 @@ class RunPersistence:
         self._last_try = -math.inf
         self.error = ""                         # the last write error while something is unstored
         self.gave_up = False
+        self._meta = {}                         # run data to write (add_meta)
+        self._meta_try = -math.inf
+        self._meta_error = ""                   # the last failed write of run data alone
 
     @property
     def failing(self) -> bool:
         """A write of what is unstored has failed and not succeeded since."""
         return self.failing_since is not None
+
+    @property
+    def meta_waiting(self) -> bool:
+        """Run data is waiting to be written (and the persistence has not given up)."""
+        return bool(self._meta) and not self.gave_up
+
+    def add_meta(self, meta: dict) -> None:
+        """Write run data ``meta`` (key -> JSON value; a key written again replaces its value) at the next
+        :meth:`write`."""
+        self._meta.update(meta)
 
     def unstored(self) -> tuple[list, list]:
         """The finished experiments and iteration records that memory holds and the store lacks."""
@@ -75,20 +93,25 @@ class RunPersistence:
 
     def write(self) -> Written:
         """Write what memory holds and the store lacks, in one transaction (see the module docstring)."""
+        if self.gave_up:
+            return Written(False)
         exps, recs = self.unstored()
         h = self.gma.history
         if not exps and not recs and self._start_stored:
             self._scan_exp, self._scan_rec = len(h.experiments), len(self.gma.records)
+            if self._meta:
+                self._write_meta()
             return Written(True)
         now = self._clock()
         if self.failing and now - self._last_try < RETRY_PERIOD:
             return Written(False)
         self._last_try = now
-        meta = None if self._start_stored else {**h.meta, **self._run_meta, "c0": h.c0}
+        meta = dict(self._meta) if self._start_stored else {**h.meta, **self._run_meta, "c0": h.c0, **self._meta}
         try:
-            self.store.save_progress(exps, recs, h.pending if recs or meta else None, meta)
+            self.store.save_progress(exps, recs, h.pending if recs or not self._start_stored else None, meta or None)
         except StoreError as err:
             return self._failed(str(err), now, len(exps), len(recs))
+        self._meta_stored()
         self._start_stored = True
         self._stored_ids.update(q.request_id for q, _ in exps)
         self._stored_ks.update(rec.k for rec in recs)
@@ -99,6 +122,30 @@ class RunPersistence:
                           "going on from the held setpoints")
             self.failing_since, self.error, change = None, "", "recovered"
         return Written(True, exps, recs, change)
+
+    def _write_meta(self) -> None:
+        """Write the waiting run data alone (after a failure at most every RETRY_PERIOD s); a failure keeps it for
+        the next write."""
+        now = self._clock()
+        if self._meta_error and now - self._meta_try < RETRY_PERIOD:
+            return
+        self._meta_try = now
+        try:
+            self.store.save_progress(meta=dict(self._meta))
+        except StoreError as err:
+            if not self._meta_error:
+                self.log.error(f"{err}: run data ({', '.join(sorted(self._meta))}) kept in memory; trying again every "
+                               f"{RETRY_PERIOD:g} s and with the next records (the run goes on)")
+            self._meta_error = str(err)
+            return
+        self._meta_stored()
+
+    def _meta_stored(self) -> None:
+        """The waiting run data was written (alone or with records)."""
+        if self._meta_error:
+            self.log.info(f"run data ({', '.join(sorted(self._meta))}) stored in {self.store.path} after failed "
+                          "writes")
+        self._meta, self._meta_error = {}, ""
 
     def _failed(self, err: str, now: float, n_exp: int, n_rec: int) -> Written:
         self.error = err

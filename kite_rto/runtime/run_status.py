@@ -33,8 +33,8 @@ def status_values(run) -> dict:
     kv = {"iteration": len(run.gma.records), "phase": run.phase, "experiments_done": len(run.gma.history.experiments)}
     if run.manual_note:
         kv["manual_setpoints"] = run.manual_note
-    if run.storage_error:
-        kv["storage_error"] = run.storage_error
+    if run.persist.error:
+        kv["storage_error"] = run.persist.error
     if req is not None:
         kv.update(experiment=req.request_id, purpose=req.purpose, setpoints_deg=shape_degrees(req.c),
                   experiment_t_start=f"{run.session.evaluator.t_start:.2f}")

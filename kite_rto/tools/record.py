@@ -37,7 +37,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import UInt32
+from std_msgs.msg import String, UInt32
 from visualization_msgs.msg import MarkerArray
 
 from ..nodes import topics as T
@@ -67,6 +67,8 @@ TOPICS: dict = {
     T.SYNC: (JointState, MEASUREMENTS),
     T.MANUAL_SETPOINTS: (JointState, RELIABLE_10),
     T.MARKERS: (MarkerArray, RELIABLE_10),
+    T.PLANT_CONFIG: (String, LATCHED),
+    T.RUN: (String, LATCHED),
 }
 """Every project topic -> (message class, QoS its publisher offers). A test checks it covers ``nodes.topics``."""
 
