@@ -17,8 +17,9 @@ record`` without ``--use-sim-time``. Each sample is recorded once (the lockstep 
 are skipped); samples that never arrived are counted and reported (the ``wrote`` line and a ``kite_record_gaps``
 metadata record: per topic the number missing and the largest gap). The parameters of every node in the graph are
 stored as MCAP ``Metadata`` records, one per node (name = the node's full name, e.g. ``/plant``; fetched through its
-``get_parameters`` service when the recorder first sees it), and one ``kite_record`` record says how the file was
-written.
+``get_parameters`` service when the recorder first sees it), one ``kite_record`` record says how the file was
+written, and a ``kite_rto_run`` record (:data:`RUN_METADATA`) holds the last run description heard on ``/rto/run``
+(the optimizer's settings and plant, JSON), so that ``kite_report --mcap`` judges the recording against its run.
 """
 from __future__ import annotations
 
@@ -37,6 +38,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from rclpy.serialization import deserialize_message
 from std_msgs.msg import String, UInt32
 from visualization_msgs.msg import MarkerArray
 
@@ -48,8 +50,8 @@ from .graph_params import GraphParameters
 from .mcap_writer import McapRecording, generated_definition, message_definition, qos_yaml, type_name
 from .record_time import LOG_TIME_MODES, PER_SAMPLE, SampleGaps, SimLogTime
 
-__all__ = ["TOPICS", "topic_type", "type_name", "message_definition", "generated_definition", "qos_yaml",
-           "McapRecording", "RecordNode", "main"]
+__all__ = ["TOPICS", "RUN_METADATA", "topic_type", "type_name", "message_definition", "generated_definition",
+           "qos_yaml", "McapRecording", "RecordNode", "main"]
 
 TOPICS: dict = {
     T.CLOCK: (Clock, MEASUREMENTS),
@@ -72,6 +74,9 @@ TOPICS: dict = {
 }
 """Every project topic -> (message class, QoS its publisher offers). A test checks it covers ``nodes.topics``."""
 
+RUN_METADATA = "kite_rto_run"
+"""Name of the metadata record that holds the last ``/rto/run`` description heard (key ``description``: JSON)."""
+
 
 def topic_type(topic: str):
     """Message class of a project topic; ``KeyError`` naming the known topics if it is not one."""
@@ -93,13 +98,15 @@ def subscriber_qos(topic: str, depth: int = 10) -> QoSProfile:
 class RecordNode:
     """Raw subscriptions on ``node``, one per topic (QoS matched to its publishers, deep queues), that write every
     message to a :class:`McapRecording` as it arrives: log time by :class:`~kite_rto.tools.record_time.SimLogTime`
-    (``log_time`` = ``sim`` or ``wall``), publish time = wall receive time; re-published samples skipped."""
+    (``log_time`` = ``sim`` or ``wall``), publish time = wall receive time; re-published samples skipped. The last
+    ``/rto/run`` message is kept for :meth:`run_description`."""
 
     def __init__(self, node, recording: McapRecording, topics, depth: int = 1000, log_time: str = "sim"):
         self.node = node
         self.recording = recording
         self.started = time.monotonic()
         self.clock = SimLogTime({t: type_name(TOPICS[t][0]) for t in topics}, log_time)
+        self._last_run = None               # CDR bytes of the last /rto/run message
         for topic in topics:
             cls, offered = TOPICS[topic]
             recording.add_topic(topic, cls, offered)
@@ -115,7 +122,13 @@ class RecordNode:
             t = log_time(topic, data, wall)
             if t is not None:
                 write(topic, data, t, wall)
+            if topic == T.RUN:
+                self._last_run = data
         return callback
+
+    def run_description(self) -> str | None:
+        """The JSON text of the last ``/rto/run`` message recorded (None: none came)."""
+        return None if self._last_run is None else deserialize_message(self._last_run, String).data
 
 
 def _make_node(args):
@@ -142,6 +155,9 @@ def _make_node(args):
                 request_exit(self, 0)
 
         def destroy_node(self):
+            run = self.rec.run_description()
+            if run is not None:                                     # what the recorded run is, for its report
+                self.recording.add_metadata(RUN_METADATA, {"description": run})
             gaps = self.rec.clock.gaps
             missing = gaps.report()
             self.recording.add_metadata("kite_record_gaps", {      # how complete the file is, for its readers
