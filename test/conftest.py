@@ -14,6 +14,9 @@ QUICK_FOLDERS = ("kite", "flight", "gma", "rto", "runtime", "campaign")
 """The pure core's folders: their tests start no ROS process and form the quick tier, except :data:`NOT_QUICK`."""
 NOT_QUICK = {
     "test_kite_rto.py", "test_lifecycle_run.py", "test_baselines.py",      # the kite's RTO flown by the pure runner
+    "test_run_description.py::test_the_plants_configuration_is_stored_with_the_description",    # ... and by the
+    "test_run_description.py::test_a_failed_write_of_the_description_keeps_it_and_the_run_goes_on",  # storage
+    "test_run_description.py::test_a_bad_configuration_is_rejected_and_the_run_goes_on",        # tests' flight
     "test_kite_ocp.py",                                                       # the lap OCP solved with IPOPT
     "test_campaign_executor.py",                                              # Dask scheduler and worker processes
     "test_gma_noise.py", "test_gma_noise_filter.py", "test_gma_bound_hold.py",   # many noisy GMA runs

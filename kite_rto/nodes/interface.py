@@ -9,7 +9,8 @@ import math
 from builtin_interfaces.msg import Time
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-__all__ = ["RELIABLE_10", "MEASUREMENTS", "LATCHED", "LAP_HISTORY", "stamp_to_ns", "ns_to_stamp", "finite_floats"]
+__all__ = ["RELIABLE_10", "MEASUREMENTS", "LATCHED", "LATCHED_10", "LAP_HISTORY", "stamp_to_ns", "ns_to_stamp",
+           "finite_floats"]
 
 RELIABLE_10 = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.VOLATILE)
@@ -22,6 +23,11 @@ Subscribers stay at ``RELIABLE_10``: the depth is not part of QoS compatibility.
 LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 """Setpoints: a late joiner gets the current value."""
+LATCHED_10 = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+"""A subscriber of a latched topic that must not lose one of several messages arriving at once (the optimizer's
+``/kite/plant_config``: each one is checked); it matches ``LATCHED`` publishers (the depth is not part of QoS
+compatibility)."""
 LAP_HISTORY = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 """Per-lap results (``/kite/laps``): a subscriber that matches late (a monitor started during a run, or one that

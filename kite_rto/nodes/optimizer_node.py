@@ -3,7 +3,10 @@
 Drives :class:`kite_rto.rto.session.RTOSession` (the same per-sample logic as the pure runner): subscribes the
 plant's measurements (joined by stamp), runs GMA's nominal and perturbation experiments, publishes
 ``/rto/setpoints`` (reliable + transient-local) and ``/rto/status`` (diagnostic_msgs), and writes every finished
-experiment and iteration to an SQLite database, from which a restarted optimizer resumes.
+experiment and iteration to an SQLite database, from which a restarted optimizer resumes. The run's description
+(:class:`~kite_rto.rto.run.RunDescription`: its settings and plant) is stored there (meta key ``run``) and published
+on ``/rto/run`` (latched JSON), with the plant once the plant's ``/kite/plant_config`` arrives (a resumed run keeps
+the stored one until then).
 
 After each plant sample it has processed it publishes ``/rto/sync`` (sensor_msgs/JointState stamped with the sample's
 time: the setpoints in force, rad, and ``updates``, the number of setpoint messages this optimizer has published). A
@@ -28,35 +31,34 @@ full disk (:class:`~kite_rto.runtime.store_fault.DiskFull`).
 """
 from __future__ import annotations
 
-import math
 import os
 import sys
-import threading
-import time
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PointStamped, Vector3Stamped, WrenchStamped
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import JointState
-from std_msgs.msg import UInt32
 
 from ..flight.path import Setpoints
 from ..gma import GMA
-from ..kite.params import KiteParams, ParameterError
-from ..rto.builder import gma_directions, lap_problem, make_gma, model_only_optimum
+from ..kite.params import ParameterError
+from ..rto.builder import make_gma
+from ..rto.run import RUN_KEY, RunDescription
 from ..gma import StoreError
 from ..rto.session import RTOSession
+from ..runtime.gma_build import GMABuild
 from ..runtime.operator_log import transition_event, was_paused
 from ..runtime.optimizer_run import OptimizerRun
 from ..runtime.run_db import SETTINGS_KEY, RunDatabaseError, open_run_database
+from ..runtime.run_description import stored_description
 from ..runtime.store_fault import DiskFull
-from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
+from .interface import RELIABLE_10
 from .optimizer_params import PARAMS, cross_check, run_settings, settings_from_params
+from .optimizer_wire import RunWire, status_message
 from .parameters import declare_params
 from .spin import request_exit, run_node
 from .stop_signals import STOP
-from .topics import CRASHES, MANUAL_SETPOINTS, POSITION, SETPOINTS, STATE, STATUS, SYNC, SYNC_NAMES, TENSION, WIND, WIND_ESTIMATE
+from .topics import MANUAL_SETPOINTS, STATUS
 
 __all__ = ["OptimizerNode", "PARAMS", "STORAGE_EXIT", "STORE_FULL_ENV", "main"]
 
@@ -81,17 +83,15 @@ class OptimizerNode(LifecycleNode):
         self.store = None
         self._open_database(v["resume"])
         self.run = None                        # the GMA run, once built (see _build)
+        self.wire = None                       # its topics (RunWire), made with it
         self.state = "unconfigured"            # the lifecycle state (also on /rto/status)
-        self.starting = "unconfigured: waiting for configure"  # what the start-up is doing (status meanwhile)
         self.pub_status = self.create_publisher(DiagnosticArray, STATUS, RELIABLE_10)
         self.create_subscription(JointState, MANUAL_SETPOINTS, self.manual_callback, RELIABLE_10)
         self.manual_received = 0               # manual setpoint messages handled (status: an operator tool waits on it)
         self.create_timer(1.0, self._every_second, clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self._builder = None
+        self._builder = None                   # the GMABuild of the last configure
         self._build_timer = None
         self._start_ticks = 0                  # _finish_start calls while starting (status every 5th)
-        self._cancel = threading.Event()       # cleanup / destroy_node: the worker stops at its next step
-        self._gma_ready = threading.Event()
         paused = was_paused(self.store.events())
         if v["autostart"]:
             self.trigger_configure()
@@ -144,6 +144,12 @@ class OptimizerNode(LifecycleNode):
         self.publish_status()
         return TransitionCallbackReturn.SUCCESS
 
+    @property
+    def starting(self) -> str:
+        """What the start-up is doing (the status until the run exists)."""
+        b = self._builder
+        return "unconfigured: waiting for configure" if b is None or b.cancelled.is_set() else b.phase
+
     def _sim_time(self) -> float | None:
         """Sim time of the last sample the run processed, s (None before the first)."""
         last = None if self.run is None else self.run.join.last
@@ -155,17 +161,9 @@ class OptimizerNode(LifecycleNode):
         def configure():
             if self.store is None:
                 self._open_database(True)      # this process's own run (or a new one): resume it
-            self._cancel.clear()
-            self._gma_ready.clear()
-            self._built = None
             self._start_ticks = 0
-            self.starting = "starting"
-            # The NLP builds and the model's optimum and directions take seconds (10-14 s when nothing is cached):
-            # they run on a worker thread, so the services and the status answer from the first second. Once GMA
-            # exists (its first experiment needs no NLP) the executor starts flying while the worker creates GMA's
-            # NLPs, which the first iteration's end needs (GMA.prepare; a thread that needs them earlier waits).
-            self._builder = threading.Thread(target=self._build, args=(self._history,), name="optimizer-build",
-                                             daemon=True)
+            # seconds of NLP builds on a worker thread: the services and the status answer meanwhile
+            self._builder = GMABuild(self.settings, self._history, self.get_logger(), make=make_gma)
             self._builder.start()
             self._build_timer = self.create_timer(0.05, self._finish_start,
                                                   clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -199,61 +197,25 @@ class OptimizerNode(LifecycleNode):
 
     def _stop_build(self) -> None:
         """Stop the worker at its next step and wait for it (CasADi must not run on two threads), drop the run."""
-        self._cancel.set()
         if self._builder is not None:
-            self._builder.join(120.0)
+            self._builder.cancel()
         if self._build_timer is not None:
             self._build_timer.cancel()
-        for name in ("pub_setpoints", "pub_sync", "pub_wind_estimate"):
-            if getattr(self, name, None) is not None:
-                self.destroy_publisher(getattr(self, name))
-                setattr(self, name, None)
-        for sub in getattr(self, "_run_subs", ()):
-            self.destroy_subscription(sub)
-        self._run_subs = []
+        if self.wire is not None:
+            self.wire.destroy()
+            self.wire = None
         self.run = None
-        self.starting = "unconfigured: waiting for configure"
 
     def _close(self) -> None:
         if self.store is not None:
             self.store.close()
             self.store = None
 
-    def _build(self, history) -> None:
-        """Worker thread: the model's problem, optimum, directions and GMA (disk-cached where possible), then
-        GMA's NLPs."""
-        try:
-            s = self.settings
-            for what, step in (("building the lap OCP", lambda: lap_problem(s)),
-                               ("solving for the model's optimum", lambda: model_only_optimum(s)),
-                               ("computing the privileged directions", lambda: s.gradient != "directional" or
-                                gma_directions(s))):
-                if self._cancel.is_set():
-                    return self._gma_ready.set()
-                self.starting = f"starting: {what}"
-                step()
-            if history is not None:
-                self.starting = "starting: resuming GMA from the database"
-            self._built = make_gma(s, history=history)
-        except ValueError as err:       # e.g. more privileged directions than setpoints free to move on this box
-            self._built = ParameterError(f"parameters gradient = {self.p['gradient']!r}, n_directions = "
-                                         f"{self.p['n_directions']}: {err}")
-        except Exception as err:  # noqa: BLE001 - reported and turned into a clean exit by _finish_start
-            self._built = err
-        self._gma_ready.set()
-        if isinstance(self._built, GMA) and not self._cancel.is_set():
-            try:
-                t0 = time.perf_counter()
-                self._built.prepare()
-                self.get_logger().info(f"GMA's NLPs built in {time.perf_counter() - t0:.1f} s")
-            except Exception as err:  # noqa: BLE001 - the executor meets it again where it needs the NLPs
-                self.get_logger().error(f"building GMA's NLPs failed: {err!r}")
-
     def wait_until_started(self, timeout: float | None = None) -> bool:
         """Block until the start-up work is done and the run is set up (for a node used without spinning, e.g.
         composed in a test); True once :attr:`run` exists."""
-        self._gma_ready.wait(timeout)
-        if self.run is None and self._gma_ready.is_set():
+        b = self._builder
+        if b is not None and b.ready.wait(timeout) and self.run is None:
             self._finish_start()
         return self.run is not None
 
@@ -261,14 +223,14 @@ class OptimizerNode(LifecycleNode):
         """Executor thread: once GMA exists, subscribe, publish the first setpoints (or exit 2 on an error)."""
         if self.run is not None:
             return
-        if not self._gma_ready.is_set():        # meanwhile, the phase four times a second (a new monitor sees it)
+        if not self._builder.ready.is_set():    # meanwhile, the phase four times a second (a new monitor sees it)
             self._start_ticks += 1
             if self._start_ticks % 5 == 0:
                 self.publish_status()
             return
         self._build_timer.cancel()
-        built = self._built
-        if self._cancel.is_set():               # cleaned up meanwhile
+        built = self._builder.built
+        if self._builder.cancelled.is_set():    # cleaned up meanwhile
             return
         if isinstance(built, ParameterError):
             print(f"[kite_rto] refusing to start: {built}", file=sys.stderr, flush=True)
@@ -277,28 +239,25 @@ class OptimizerNode(LifecycleNode):
             self.get_logger().fatal(f"start-up failed: {built!r}")
             return request_exit(self, 1)
         self.gma, v, history = built, self.p, self._history
-        self.pub_setpoints = self.create_publisher(JointState, SETPOINTS, LATCHED)
-        self.pub_sync = self.create_publisher(JointState, SYNC, MEASUREMENTS)
-        self.pub_wind_estimate = self.create_publisher(Vector3Stamped, WIND_ESTIMATE, MEASUREMENTS)
-        self._estimate_stamp = None
+        description, note = stored_description(history.meta, self.settings) if history is not None else \
+            (RunDescription(self.settings), "")
+        if note:
+            self.get_logger().warning(note)
+        self.wire = wire = RunWire(self)
         self.run = OptimizerRun(self.gma, RTOSession(self.gma, self.settings.experiment, self.settings.max_repeats),
                                 self.store, self.settings.box.setpoint_box(), n_iter=v["n_iter"],
-                                logger=self.get_logger(), send_setpoints=self.publish_setpoints,
-                                sync=self.publish_sync, status=self.publish_status, finished=self.finished,
+                                logger=self.get_logger(), send_setpoints=wire.setpoints, sync=wire.sync,
+                                status=self.publish_status, finished=self.finished,
                                 storage_lost=lambda: request_exit(self, STORAGE_EXIT),
-                                storage_timeout=v["storage_timeout"], run_meta={SETTINGS_KEY: run_settings(v)})
-        self.session = self.run.session
-        self._run_subs = [
-            self.create_subscription(JointState, STATE, self.state_callback, RELIABLE_10),
-            self.create_subscription(WrenchStamped, TENSION, self.tension_callback, RELIABLE_10),
-            self.create_subscription(PointStamped, POSITION, self.position_callback, RELIABLE_10),
-            self.create_subscription(Vector3Stamped, WIND, self.wind_callback, RELIABLE_10),
-            self.create_subscription(UInt32, CRASHES, self.crashes_callback, LATCHED)]
+                                storage_timeout=v["storage_timeout"], description=description,
+                                run_meta={SETTINGS_KEY: run_settings(v), RUN_KEY: description.to_dict()})
+        wire.attach(self.run)
         first = self.gma.next_request()
         if history is not None:
             self.get_logger().info(f"resumed from {v['db']}: {len(history.experiments)} experiments, "
                                    f"{len(history.iterations)} iterations")
         self.run.begin()                     # stores a new run's start first; publishes nothing until it is stored
+        wire.description(description)
         if self.state != "active":
             self.run.pause()                 # configured, not activated: hold the first (or the paused) setpoints
         self.get_logger().info(f"optimizer up ({self.state}): first experiment {first.request_id}")
@@ -323,21 +282,6 @@ class OptimizerNode(LifecycleNode):
                                                  clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     # ------------------------------------------------------------ subscriptions
-    def state_callback(self, msg: JointState) -> None:
-        self.run.state_reading(stamp_to_ns(msg.header.stamp), msg.name, msg.position, msg.velocity)
-
-    def tension_callback(self, msg: WrenchStamped) -> None:
-        self.run.reading(stamp_to_ns(msg.header.stamp), "tension", msg.wrench.force.x)
-
-    def position_callback(self, msg: PointStamped) -> None:
-        self.run.reading(stamp_to_ns(msg.header.stamp), "position", (msg.point.x, msg.point.y, msg.point.z))
-
-    def wind_callback(self, msg: Vector3Stamped) -> None:
-        self.run.reading(stamp_to_ns(msg.header.stamp), "wind", msg.vector.x)
-
-    def crashes_callback(self, msg: UInt32) -> None:
-        self.run.crashes(int(msg.data))
-
     def manual_callback(self, msg: JointState) -> None:
         """Operator setpoints (rad, names as /rto/setpoints), taken only while inactive; a refusal is a throttled
         warning naming the value and what was expected (and ``manual_setpoints`` on /rto/status)."""
@@ -364,33 +308,6 @@ class OptimizerNode(LifecycleNode):
         if self.p["exit_when_done"]:
             request_exit(self, 0)
 
-    def publish_setpoints(self, c: list) -> None:
-        """Publish checked setpoints ``c`` (rad) on /rto/setpoints (latched)."""
-        msg = JointState()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.name = Setpoints.names()
-        msg.position = c
-        self.pub_setpoints.publish(msg)
-
-    def publish_sync(self, stamp: int) -> None:
-        """Tell a synchronized controller that the sample stamped ``stamp`` (ns) is processed (see the module doc);
-        publish the wind the cost normalizes by for it (``/kite/wind_estimate``, m/s at z_ref, ``vector.x``)."""
-        w = self.session.evaluator.wind_estimate
-        if math.isfinite(w) and stamp != self._estimate_stamp:      # once per sample (a re-sync repeats none)
-            self._estimate_stamp = stamp
-            est = Vector3Stamped()
-            est.header.stamp = ns_to_stamp(stamp)
-            est.header.frame_id = "anchor"
-            est.vector.x = float(w)
-            self.pub_wind_estimate.publish(est)
-        if self.run.c_published is None:        # refused the first setpoints: nothing to fly
-            return
-        msg = JointState()
-        msg.header.stamp = ns_to_stamp(stamp)
-        msg.name = SYNC_NAMES
-        msg.position = [*self.run.c_published, float(self.run.updates)]
-        self.pub_sync.publish(msg)
-
     def _every_second(self) -> None:
         """Steady 1 Hz: retry a failed database write (also when no sample comes), then the status."""
         if self.run is not None:
@@ -398,28 +315,15 @@ class OptimizerNode(LifecycleNode):
         self.publish_status()
 
     def publish_status(self) -> None:
-        st = DiagnosticStatus(name="kite_rto/optimizer", hardware_id="kite_rto")
-        if self.run is None:
-            st.level, st.message = DiagnosticStatus.OK, self.starting
-            st.values = [KeyValue(key="phase", value=self.starting)]
-        else:
-            st.level = DiagnosticStatus.ERROR if self.session.stopped or self.run.storage_error \
-                else DiagnosticStatus.OK
-            st.message = self.run.phase
-            st.values = [KeyValue(key=k, value=str(v)) for k, v in self.run.status_values().items()]
-        st.values += [KeyValue(key="lifecycle", value=self.state),
-                      KeyValue(key="manual_received", value=str(self.manual_received))]
-        msg = DiagnosticArray(status=[st])
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self.pub_status.publish(msg)
+        self.pub_status.publish(status_message(self.run, self.state, self.starting, self.manual_received,
+                                               self.get_clock().now().to_msg()))
 
     def destroy_node(self):
         # The worker may be inside CasADi, which must not run concurrently with anything else touching CasADi
         # (a test or a composed process going on): let it finish its current step (seconds) before going on,
         # unless the process is stopping on a signal (run_node then ends it without waiting for the worker).
-        self._cancel.set()
-        if STOP.signum is None and self._builder is not None:
-            self._builder.join(120.0)
+        if self._builder is not None:
+            self._builder.cancel(wait=STOP.signum is None)
         self._close()
         done = super().destroy_node()
         # rclpy's LifecycleNode leaves its state machine's services (get_state, change_state, ...) on the graph after

@@ -10,7 +10,9 @@ and ``command_timeout`` s have passed (the controller left, or DDS dropped a kil
 the first command, so a run does not depend on how long the controller takes to start.
 Real time also measures the lag of the steering commands and lowers a ``rate_factor`` the machine cannot hold
 (:mod:`kite_rto.runtime.pace`). One plant per graph: a plant refuses to start where another one runs, and warns when a
-second publisher of its topics appears (:mod:`kite_rto.nodes.plant_guard`).
+second publisher of its topics appears (:mod:`kite_rto.nodes.plant_guard`). At start-up it publishes what it
+simulates on ``/kite/plant_config`` (latched: its :class:`~kite_rto.kite.plant.PlantConfig` as JSON), which the
+optimizer stores in its run's description.
 """
 from __future__ import annotations
 
@@ -22,17 +24,18 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
-from std_msgs.msg import UInt32
+from std_msgs.msg import String, UInt32
 
 from ..kite.plant import KitePlant
 from ..runtime.pace import RealtimePacer
+from ..runtime.run_description import plant_json
 from ..runtime.sample_join import RejectLog
 from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, finite_floats, ns_to_stamp, stamp_to_ns
 from .parameters import declare_params
 from .plant_config import PARAMS, config_from_params
 from .plant_guard import WATCH_PERIOD, SecondPublisherWatch, refuse_if_another_plant
 from .spin import request_exit, run_node
-from .topics import CLOCK, CRASHES, POSITION, STATE, STEERING, TENSION, WIND
+from .topics import CLOCK, CRASHES, PLANT_CONFIG, POSITION, STATE, STEERING, TENSION, WIND
 
 FLUSH_TIMEOUT = 60.0
 """Wall s the plant waits at the end of its ``duration`` for readers to acknowledge its last samples."""
@@ -92,6 +95,8 @@ class PlantNode(Node):
         self.pub_wind = self.create_publisher(Vector3Stamped, WIND, MEASUREMENTS)
         self.pub_crashes = self.create_publisher(UInt32, CRASHES, LATCHED)
         self.pub_crashes.publish(UInt32(data=0))
+        self.pub_config = self.create_publisher(String, PLANT_CONFIG, LATCHED)    # what the plant is, for the
+        self.pub_config.publish(String(data=plant_json(self.plant.config)))      # optimizer's run description
         self.create_subscription(JointState, STEERING, self.steering_callback, RELIABLE_10)
         self._finished = False
         self._first_answer = None          # (wall time, step) of the first accepted command: throughput log

@@ -9,7 +9,8 @@ namespace): what the tools print, take on their command line and name MCAP chann
 from ..runtime.optimizer_sync import SYNC_NAMES
 
 __all__ = ["CLOCK", "STATE", "POSITION", "TENSION", "WIND", "STEERING", "SETPOINTS", "STATUS", "SYNC", "SYNC_NAMES",
-           "REFERENCE_PATH", "LAPS", "CRASHES", "WIND_ESTIMATE", "MARKERS", "MANUAL_SETPOINTS", "ALL", "graph_name", "relative"]
+           "REFERENCE_PATH", "LAPS", "CRASHES", "WIND_ESTIMATE", "MARKERS", "MANUAL_SETPOINTS", "PLANT_CONFIG",
+           "RUN", "ALL", "graph_name", "relative"]
 
 CLOCK = "clock"                      # in the root namespace /clock, as use_sim_time and `ros2 topic echo` expect
 STATE = "kite/state"
@@ -25,10 +26,12 @@ MANUAL_SETPOINTS = "rto/manual_setpoints"   # operator setpoints, taken by a pau
 REFERENCE_PATH = "kite/reference_path"
 LAPS = "kite/laps"
 CRASHES = "kite/crashes"
+PLANT_CONFIG = "kite/plant_config"   # the plant's PlantConfig as JSON (std_msgs/String, latched), once at start-up
+RUN = "rto/run"                      # the optimizer's run description as JSON (std_msgs/String, latched)
 MARKERS = "kite/markers"             # kite_viz (kite_rto.tools.viz): the 3-D scene, visualization_msgs/MarkerArray
 
 ALL = (CLOCK, STATE, POSITION, TENSION, WIND, WIND_ESTIMATE, STEERING, SETPOINTS, STATUS, SYNC, MANUAL_SETPOINTS,
-       REFERENCE_PATH, LAPS, CRASHES, MARKERS)
+       REFERENCE_PATH, LAPS, CRASHES, MARKERS, PLANT_CONFIG, RUN)
 """Every topic of the graph (relative names)."""
 
 

@@ -7,14 +7,16 @@ experiment and iteration to a :class:`~kite_rto.gma.HistoryStore`, and reports t
 the status changed, ``finished()`` once ``n_iter`` iterations are done, ``storage_lost()`` when the database stayed
 unwritable for ``storage_timeout`` s. :class:`kite_rto.nodes.optimizer_node` turns these into messages.
 
+The run's description (:class:`~kite_rto.rto.run.RunDescription`) is stored again with the plant's configuration
+when the plant publishes it (:meth:`OptimizerRun.plant_config`; run data, which a failed write does not hold).
+
 Nothing is lost when storage fails. What GMA holds in memory and the store lacks is written in one transaction (a
 run's start; finished experiments; the experiment that completes an iteration together with that iteration's
-record and the next requests) before any setpoint that follows from it is published. When that write fails, the
-run keeps everything in memory, holds the setpoints in force (the plant flies them; their measurements are not
-used), and tries again at the next sample (at most every :data:`RETRY_PERIOD` s) and on :meth:`OptimizerRun.tick`;
-once stored, the held experiment starts from that sample. After ``storage_timeout`` s of failed writes it gives up
-(``storage_lost``). What is stored is compared with memory by request id and iteration number, so an iteration
-that GMA completes again on resume (its last experiment stored, its record not) is written too.
+record and the next requests; :class:`~kite_rto.runtime.run_persistence.RunPersistence`) before any setpoint that
+follows from it is published. When that write fails, the run keeps everything in memory, holds the setpoints in
+force (the plant flies them; their measurements are not used), and tries again at the next sample (at most every
+:data:`~kite_rto.runtime.run_persistence.RETRY_PERIOD` s) and on :meth:`OptimizerRun.tick`; once stored, the held
+experiment starts from that sample. After ``storage_timeout`` s of failed writes it gives up (``storage_lost``).
 
 Operator (the node's lifecycle, docs/interface.md *Pausing and overriding the optimizer*): :meth:`OptimizerRun.pause`
 holds the setpoints in force and discards the experiment in progress (samples are still synchronized, nothing is
@@ -27,62 +29,46 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 
 import numpy as np
 
 from ..flight.path import SetpointError, validate_setpoints
 from ..flight.shape import setpoints_from_shape, shape_from_setpoints
-from .sample_join import RejectLog, SampleJoin, reading_error, state_values
 from ..gma import StoreError
 from ..kite.params import KiteParams
+from ..rto.run import RUN_KEY
 from .operator_log import MANUAL
+from .run_description import plant_from_json
+from .run_persistence import RunPersistence
+from .run_status import degrees, shape_degrees
+from .sample_join import RejectLog, SampleJoin, reading_error, state_values
 
-__all__ = ["OptimizerRun", "RETRY_PERIOD", "shape_degrees", "vector_text"]
-
-RETRY_PERIOD = 0.5
-"""Wall seconds between two tries of a failed write (at the next sample after it, or at the next tick)."""
-
-
-def shape_degrees(x) -> str:
-    """Setpoints in degrees of GMA's shape coordinates ``x``."""
-    return "(" + ", ".join(f"{math.degrees(v):.2f}" for v in setpoints_from_shape(x)) + ") deg"
-
-
-def _degrees(c) -> str:
-    """Setpoints ``c`` (rad) in degrees."""
-    return "(" + ", ".join(f"{math.degrees(v):.2f}" for v in c) + ") deg"
-
-
-def vector_text(v) -> str:
-    """A vector in 4 significant digits, as the status shows it."""
-    return "[" + ", ".join(f"{x:.4g}" for x in np.asarray(v, dtype=float).ravel()) + "]"
+__all__ = ["OptimizerRun"]
 
 
 class OptimizerRun:
     """GMA on the flying kite, one plant reading at a time; ``logger`` has ``info``/``warning``/``error``.
 
-    ``run_meta``: run data written with a new run's start (e.g. the settings it was created with);
+    ``run_meta``: run data written with a new run's start (e.g. the settings it was created with, its description);
+    ``description``: the run's :class:`~kite_rto.rto.run.RunDescription` (None: :meth:`plant_config` refuses);
     ``storage_timeout``: wall seconds of failed writes after which the run gives up (``storage_lost()``);
     ``clock``: wall time in s (monotonic), for the retry period and the timeout.
     """
 
     def __init__(self, gma, session, store, box, *, n_iter: int, logger, send_setpoints, sync, status, finished,
                  storage_lost=lambda: None, storage_timeout: float = 60.0, run_meta: dict | None = None,
-                 clock=time.monotonic):
+                 description=None, clock=time.monotonic):
         self.gma, self.session, self.store, self.box = gma, session, store, box
         self.n_iter = n_iter
         self.log = logger
         self._send, self._sync, self._status, self._finished = send_setpoints, sync, status, finished
-        self._storage_lost, self.storage_timeout, self._clock = storage_lost, float(storage_timeout), clock
+        self._storage_lost = storage_lost
+        self.description = description
+        self.persist = RunPersistence(gma, store, logger, run_meta=run_meta, storage_timeout=storage_timeout,
+                                      clock=clock)
         self.reject = RejectLog(logger)
         self.join = SampleJoin()
-        self._stored_ids, self._stored_ks = store.stored_keys()   # what the store holds, not what memory holds
-        self._start_stored = store.has_run()
-        self._run_meta = dict(run_meta or {})
-        self._scan_exp = self._scan_rec = 0     # everything before these indices of the history is stored
-        self._failing_since = None              # clock time of the first failed write of what is unstored
-        self._last_try = -math.inf
-        self.storage_error = ""                 # the last write error while something is unstored
         self._held = False                      # the session moved on while its records were unstored
         self._held_new = None                   # ... and asked for these setpoints (rad), applied once stored
         self.c_published = None             # setpoints of the last message sent (rad)
@@ -105,9 +91,33 @@ class OptimizerRun:
 
     def tick(self) -> None:
         """Wall-clock timer (the node: 1 Hz): retry a failed write and check ``storage_timeout`` even when no
-        sample arrives."""
-        if self._failing_since is not None and not self.done:
+        sample arrives; write waiting run data (also once the run has ended)."""
+        if (self.persist.failing and not self.done) or self.persist.meta_waiting:
             self._store()
+
+    def plant_config(self, text: str):
+        """The plant's configuration, ``text`` = JSON as the plant publishes it: the run's description with it is
+        stored (at once, or with a later write while the database cannot be written) and returned. None when the
+        description already names that plant, or when ``text`` is not a plant configuration (rejected: a throttled
+        warning naming what is wrong; the run goes on)."""
+        old = self.description
+        if old is None:
+            raise ValueError("OptimizerRun.plant_config: this run keeps no description (made with description=None)")
+        try:
+            plant = plant_from_json(text)
+        except ValueError as err:
+            return self.reject("plant_config", f"rejected plant configuration {err}")
+        if plant == old.plant:
+            return None
+        self.description = replace(old, plant=plant)
+        self.persist.add_meta({RUN_KEY: self.description.to_dict()})
+        self._store()
+        if old.plant is None:
+            self.log.info("the run's description now names the plant's configuration")
+        else:
+            self.log.warning("the plant's configuration changed during the run (a plant restarted with other "
+                             "parameters?): the run's description now names the new one")
+        return self.description
 
     # ------------------------------------------------------------ measurements
     def state_reading(self, stamp: int, names, position, velocity) -> None:
@@ -155,11 +165,11 @@ class OptimizerRun:
         if self.done:
             return
         if not self.active:                 # paused: the held setpoints fly, nothing is measured
-            if self._failing_since is not None:
+            if self.persist.failing:
                 self._store()
             self.session.evaluator.update(m)        # an inactive evaluator only follows the wind
             return
-        if self._failing_since is not None and not self._store():
+        if self.persist.failing and not self._store():
             return                          # records unstored: the held setpoints fly, nothing is measured
         if self._held:                      # stored at last: what the session asked for starts now
             self._held = False
@@ -209,7 +219,7 @@ class OptimizerRun:
         self.session.evaluator.active = False
         if not self._held:
             self._started = False
-        held = "nothing yet" if self.c_published is None else _degrees(self.c_published)
+        held = "nothing yet" if self.c_published is None else degrees(self.c_published)
         if not self.done:
             self.phase = f"paused: holding {held}"
         req = self.session.request
@@ -258,10 +268,10 @@ class OptimizerRun:
         self.gma.replace_plan(requests)
         self._moved = True
         self.setpoints(c_new)
-        self.manual_note = f"accepted {_degrees(c_new)}"
+        self.manual_note = f"accepted {degrees(c_new)}"
         if not self.done:
-            self.phase = f"paused: holding {_degrees(c_new)} (manual)"
-        self.log.info(f"manual setpoints {_degrees(c_new)} stored and published; on resume GMA continues from them "
+            self.phase = f"paused: holding {degrees(c_new)} (manual)"
+        self.log.info(f"manual setpoints {degrees(c_new)} stored and published; on resume GMA continues from them "
                       f"(experiment {requests[0].request_id})")
         self._status()
         return ""
@@ -271,8 +281,8 @@ class OptimizerRun:
             return "the optimizer is active: deactivate (pause) it first"
         if self.done:
             return f"the run has ended ({self.phase})"
-        if self._failing_since is not None or self._held:
-            return f"the database cannot be written ({self.storage_error})"
+        if self.persist.failing or self._held:
+            return f"the database cannot be written ({self.persist.error})"
         try:
             c = np.asarray(c, dtype=float)
             if c.shape != (3,):
@@ -284,76 +294,35 @@ class OptimizerRun:
         for name, v, lo, hi, deg in zip(("theta_0", "A_phi", "aspect"), x, lb, ub, (True, True, False)):
             if not lo <= v <= hi:
                 f = (lambda a: f"{math.degrees(a):.4g} deg") if deg else (lambda a: f"{a:.4g}")
-                return (f"setpoints {_degrees(c)}: shape coordinate {name} = {f(v)}: outside the optimizer's box "
+                return (f"setpoints {degrees(c)}: shape coordinate {name} = {f(v)}: outside the optimizer's box "
                         f"[{f(lo)}, {f(hi)}]")
         return ""
 
     # ------------------------------------------------------------------ storage
-    def _unstored(self) -> tuple[list, list]:
-        exps = [(q, r) for q, r in self.gma.history.experiments[self._scan_exp:]
-                if q.request_id not in self._stored_ids]
-        recs = [rec for rec in self.gma.records[self._scan_rec:] if rec.k not in self._stored_ks]
-        return exps, recs
-
     def _store(self) -> bool:
-        """Write what memory holds and the store lacks, in one transaction; True once nothing is unstored.
-
-        After a failure the write is tried again at most every :data:`RETRY_PERIOD` s; once ``storage_timeout`` s
-        have passed since the first failure, a failed try ends the run (:meth:`_give_up`)."""
-        exps, recs = self._unstored()
-        if not exps and not recs and self._start_stored:
-            self._scan_exp, self._scan_rec = len(self.gma.history.experiments), len(self.gma.records)
-            return True
-        now = self._clock()
-        if self._failing_since is not None and now - self._last_try < RETRY_PERIOD:
-            return False
-        self._last_try = now
-        h = self.gma.history
-        meta = None if self._start_stored else {**h.meta, **self._run_meta, "c0": h.c0}
-        try:
-            self.store.save_progress(exps, recs, h.pending if recs or meta else None, meta)
-        except StoreError as err:
-            self._write_failed(str(err), now, len(exps), len(recs))
-            return False
-        self._start_stored = True
-        self._stored_ids.update(q.request_id for q, _ in exps)
-        self._stored_ks.update(rec.k for rec in recs)
-        self._scan_exp, self._scan_rec = len(h.experiments), len(self.gma.records)
-        for req, res in exps:
+        """Write what memory holds and the store lacks (:meth:`RunPersistence.write`); True once nothing is
+        unstored. Logs what was stored; while writes fail the run holds (phase), after ``storage_timeout`` s it
+        ends (``storage_lost``)."""
+        w = self.persist.write()
+        for req, res in w.experiments:
             self.log.info(f"experiment {req.request_id}: tension {-res.cost:.1f} kN, "
                           f"g = {res.constraints[0]:+.1f} m, c = {shape_degrees(req.c)}")
-        for rec in recs:
+        for rec in w.records:
             self.log.info(f"iteration {rec.k}: c_k = {shape_degrees(rec.c_k)} -> c_next = "
                           f"{shape_degrees(rec.c_next)} ({rec.decision})")
             self._status()
-        if self._failing_since is not None:
-            self.log.info(f"stored in {self.store.path} after {now - self._failing_since:.1f} s of failed writes; "
-                          "going on from the held setpoints")
-            self._failing_since, self.storage_error = None, ""
+        if w.change == "failing":
+            self.phase = "holding: cannot write the database"
+            self._status()
+        elif w.change == "recovered":
             self.phase = "experiment" if self._started else "waiting for the plant"
             self._status()
-        return True
-
-    def _write_failed(self, err: str, now: float, n_exp: int, n_rec: int) -> None:
-        self.storage_error = err
-        if self._failing_since is None:
-            self._failing_since = now
-            self.phase = "holding: cannot write the database"
-            self.log.error(f"{err}. Holding the setpoints in force and keeping {n_exp} experiment(s) and {n_rec} "
-                           f"iteration(s) in memory; trying again every {RETRY_PERIOD:g} s for up to "
-                           f"{self.storage_timeout:g} s (storage_timeout)")
+        elif w.change == "gave up":
+            self.done = True
+            self.phase = self.persist.give_up_phase
             self._status()
-        if now - self._failing_since >= self.storage_timeout:
-            self._give_up(err, n_exp, n_rec)
-
-    def _give_up(self, err: str, n_exp: int, n_rec: int) -> None:
-        self.done = True
-        self.phase = f"failed: cannot write {self.store.path} for {self.storage_timeout:g} s"
-        self.log.error(f"{self.phase} ({err}): stopping. Everything stored so far is complete; {n_exp} finished "
-                       f"experiment(s) and {n_rec} iteration(s) were not stored and will be measured and computed "
-                       "again. Free the disk and restart the optimizer on the same database to resume")
-        self._status()
-        self._storage_lost()
+            self._storage_lost()
+        return w.stored
 
     def finish(self) -> None:
         rec = self.gma.records[-1]
@@ -377,24 +346,3 @@ class OptimizerRun:
         self.c_published = [float(x) for x in c]
         self._send(self.c_published)
         self.updates += 1
-
-    def status_values(self) -> dict:
-        """The status as key -> value (str or number): iteration, phase, the current experiment, the last record."""
-        req = self.session.request
-        kv = {"iteration": len(self.gma.records), "phase": self.phase,
-              "experiments_done": len(self.gma.history.experiments)}
-        if self.manual_note:
-            kv["manual_setpoints"] = self.manual_note
-        if self.storage_error:
-            kv["storage_error"] = self.storage_error
-        if req is not None:
-            kv.update(experiment=req.request_id, purpose=req.purpose, setpoints_deg=shape_degrees(req.c),
-                      experiment_t_start=f"{self.session.evaluator.t_start:.2f}")
-        if self.gma.records:
-            r = self.gma.records[-1]
-            kv.update(measured_cost_kN=f"{r.cost:.2f}", measured_constraint_m=f"{r.constraints[0]:.2f}",
-                      grad_cost=vector_text(r.grad_cost), grad_constraint=vector_text(r.jac_constraints.ravel()),
-                      eps=vector_text(r.eps), lambda_=vector_text(r.lam), mu=vector_text(r.mu.ravel()),
-                      c_star_deg=shape_degrees(r.c_star), c_next_deg=shape_degrees(r.c_next),
-                      decision=r.decision)
-        return {k.rstrip("_"): v for k, v in kv.items()}

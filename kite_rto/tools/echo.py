@@ -23,7 +23,8 @@ from rclpy.utilities import remove_ros_args
 
 from ..nodes.namespace import add_namespace_option, tool_ros_args
 from ..nodes.topics import graph_name, relative
-from .record import TOPICS, subscriber_qos, topic_type, type_name
+from .mcap_writer import type_name
+from .record import TOPICS, subscriber_qos, topic_type
 
 __all__ = ["to_yaml", "run_cli", "main"]
 

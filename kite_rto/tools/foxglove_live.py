@@ -35,7 +35,8 @@ from ..nodes.namespace import add_namespace_option, namespace_args
 from ..nodes.parameters import declare_params
 from ..nodes.spin import run_node
 from .markers import PointCache, marker_array
-from .record import TOPICS, message_definition, subscriber_qos, type_name
+from .mcap_writer import message_definition, type_name
+from .record import TOPICS, subscriber_qos
 from .record_time import PER_SAMPLE, SimLogTime
 from .viz import PARAMS as SCENE_PARAMS
 from .viz import VIEWER, SceneFeed, tracker_from_params

@@ -1,5 +1,7 @@
 """Read an MCAP recording of a kite_rto run (``kite_record``, ``demo --record``) back into what the report uses:
-the flown samples, laps, setpoints and optimizer status, and the GMA history rebuilt from /rto/status."""
+the flown samples, laps, setpoints and optimizer status, the run's description, and the GMA history rebuilt from
+/rto/status (with the description in its meta, so that the report judges the recording against its own plant and
+floor)."""
 from __future__ import annotations
 
 import math
@@ -15,7 +17,8 @@ from ..flight.path import Setpoints
 from ..flight.shape import shape_from_setpoints
 from ..nodes import topics as T
 from ..nodes.interface import stamp_to_ns
-from .record import TOPICS
+from ..rto.run import RUN_KEY, RunDescription
+from .record import RUN_METADATA, TOPICS
 
 __all__ = ["read_mcap", "history_from_mcap"]
 
@@ -26,11 +29,13 @@ def read_mcap(path) -> SimpleNamespace:
     Returns ``samples`` = (t, theta, phi) arrays from /kite/state (stamps, s), ``laps`` (dicts of the
     /kite/laps fields plus ``t_end``), ``setpoints`` = list of (sim t, c rad) from /rto/setpoints (sim t = stamp of
     the last sample recorded before it), ``status`` = list of (sim t, key/values) of the optimizer's /rto/status,
-    ``reference`` = (theta, phi) of the last /kite/reference_path (or None), ``crashes`` and ``topics`` (counts).
+    ``reference`` = (theta, phi) of the last /kite/reference_path (or None), ``crashes``, ``topics`` (counts) and
+    ``run``: the run's description as JSON text, from the ``kite_rto_run`` metadata record or else the last /rto/run
+    message (None: the recording holds none).
     """
-    wanted = [T.STATE, T.LAPS, T.SETPOINTS, T.STATUS, T.REFERENCE_PATH, T.CRASHES]
+    wanted = [T.STATE, T.LAPS, T.SETPOINTS, T.STATUS, T.REFERENCE_PATH, T.CRASHES, T.RUN]
     t, theta, phi = [], [], []
-    data = SimpleNamespace(laps=[], setpoints=[], status=[], reference=None, crashes=0, topics={})
+    data = SimpleNamespace(laps=[], setpoints=[], status=[], reference=None, crashes=0, topics={}, run=None)
     with open(path, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()
@@ -68,6 +73,11 @@ def read_mcap(path) -> SimpleNamespace:
                 data.reference = (np.arctan2(np.hypot(p[:, 1], p[:, 2]), p[:, 0]), np.arctan2(p[:, 1], p[:, 2]))
             elif topic == T.CRASHES:
                 data.crashes = max(data.crashes, int(msg.data))
+            elif topic == T.RUN:
+                data.run = msg.data
+        for record in reader.iter_metadata():
+            if record.name == RUN_METADATA and "description" in record.metadata:
+                data.run = record.metadata["description"]
     data.samples = (np.array(t), np.array(theta), np.array(phi))
     return data
 
@@ -83,8 +93,10 @@ def _parse_deg(text: str):
 def history_from_mcap(data: SimpleNamespace):
     """Rebuild what the report needs of the optimizer's history from a recording's /rto/status and
     /rto/setpoints: c_0 (the first setpoints), per finished iteration the measured cost and constraint, c_{k+1}
-    (0.01 deg resolution, as published) and the decision, and the experiments that finished while recording (id,
-    purpose, iteration, sim-time end = start of the next one). None if the recording has no finished iteration."""
+    (0.01 deg resolution, as published) and the decision, the experiments that finished while recording (id,
+    purpose, iteration, sim-time end = start of the next one), and in ``meta`` the run's description (under
+    ``RUN_KEY``; none when the recording holds none; ``ValueError`` when it is not a description). None if the
+    recording has no finished iteration."""
     iterations = {}
     experiments = []                                     # [id, purpose, iteration, t_start]
     done = []                                            # experiments_done of each status
@@ -136,5 +148,6 @@ def history_from_mcap(data: SimpleNamespace):
                      SimpleNamespace(extra={"t_end": None if math.isnan(t_end) else t_end})))
     ordered = [iterations[n] for n in sorted(iterations)]
     # in GMA's shape coordinates, like an optimizer's History (the recording has setpoints)
+    meta = {} if data.run is None else {RUN_KEY: RunDescription.from_json(data.run).to_dict()}
     return SimpleNamespace(c0=shape_from_setpoints(np.asarray(c0, dtype=float)), iterations=ordered,
-                           experiments=exps)
+                           experiments=exps, meta=meta)

@@ -5,10 +5,11 @@ Used by ``kite_record`` and ``kite_foxglove``. The rule (``--log-time sim``, the
 * a message with a header (every stamped project type, and ``visualization_msgs/MarkerArray`` by its first
   marker's header) is logged at its header stamp: the simulated time of the sample it belongs to;
 * ``/clock`` at the time it carries;
-* a message without a header (``/kite/crashes``), an empty marker array, a stamp of 0 on a topic that is not
-  stamped per sample (not set: the latched ``/kite/reference_path``; on the per-sample topics and ``/kite/markers``
-  0 is sample 0) or a wall-clock stamp (a node run without ``use_sim_time``: more than
-  :data:`WALL_STAMP_GAP` s ahead of the simulated clock) is logged at the latest ``/clock`` heard (0 before the first).
+* a message without a header (``/kite/crashes``, ``/kite/plant_config``, ``/rto/run``), an empty marker array, a
+  stamp of 0 on a topic that is not stamped per sample (not set: the latched ``/kite/reference_path``; on the
+  per-sample topics and ``/kite/markers`` 0 is sample 0) or a wall-clock stamp (a node run without
+  ``use_sim_time``: more than :data:`WALL_STAMP_GAP` s ahead of the simulated clock) is logged at the latest
+  ``/clock`` heard (0 before the first).
 
 ``--log-time wall`` keeps the wall receive time (as ``ros2 bag record`` without ``--use-sim-time``).
 
@@ -55,7 +56,7 @@ def cdr_stamp(data: bytes, offset: int) -> int | None:
 
 
 def _stamp_offset(type_name: str) -> int | None:
-    if type_name in ("std_msgs/msg/UInt32",):
+    if type_name in ("std_msgs/msg/UInt32", "std_msgs/msg/String"):
         return None
     if type_name == "visualization_msgs/msg/MarkerArray":
         return _ARRAY_FIRST

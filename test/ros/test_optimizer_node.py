@@ -2,6 +2,7 @@
 import os
 import signal
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,10 +13,14 @@ from kite_rto.rto.runner import run_rto
 from kite_rto.kite.plant import PlantConfig
 from kite_rto.flight.shape import setpoints_from_shape
 from geometry_msgs.msg import Vector3Stamped
+from std_msgs.msg import String
 
 from kite_rto.gma import HistoryStore
-from kite_rto.nodes.interface import MEASUREMENTS, stamp_to_ns
+from kite_rto.nodes.interface import LATCHED, LATCHED_10, MEASUREMENTS, stamp_to_ns
+from kite_rto.rto.run import RunDescription
+from kite_rto.runtime.run_description import plant_json
 from kite_rto.tools.compare_pure import compare_histories
+from kite_rto.tools.rto_report import run_of
 
 from rosutil import Probe, start_node, stop
 
@@ -120,3 +125,50 @@ def test_killed_optimizer_resumes_from_its_database(probe, ros_env, tmp_path):
     # than the liveliness lease, flew on unsynchronized and synchronized again with the new one
     assert ("steering unsynchronized" in ctrl_out) <= ("/rto/sync is back" in ctrl_out), ctrl_out
     assert "Traceback" not in ctrl_out, ctrl_out
+
+
+def test_the_run_description_names_the_plant_and_survives_bad_messages(probe, ros_env, tmp_path):
+    """The optimizer stores and publishes its run's description: its settings (h_min 115 m) from the start, the
+    plant's configuration (w_ref 9 m/s) once the plant publishes it, which is what ``kite_report --db`` judges
+    against. Bad /kite/plant_config messages are rejected with a warning and the optimizer takes the next good one.
+    Restarted without a plant, it keeps the stored description."""
+    db = tmp_path / "rto.sqlite"
+    runs = []
+    probe.node.create_subscription(String, "/rto/run", lambda m: runs.append(RunDescription.from_json(m.data)),
+                                   LATCHED)
+    params = {"db": str(db), **SHORT, "h_min": 115.0}
+    opt = start_node("optimizer", params, ros_env)
+    plant = opt2 = None
+    try:
+        assert probe.spin_until(lambda: runs, 120.0), "the optimizer published no /rto/run"
+        assert runs[0].plant is None and runs[0].h_min == 115.0
+        assert run_of(stored(db)[0]) == runs[0]                     # stored with the run's start
+        plant = start_node("plant", {**QUIET, "w_ref": 9.0}, ros_env)
+        assert probe.spin_until(lambda: runs[-1].plant is not None, 60.0), "the plant's configuration never came"
+        flown = runs[-1].plant
+        assert flown.params.w_ref == 9.0 and not flown.turbulence.enabled and runs[-1].h_min == 115.0
+        judged = run_of(stored(db)[0])                              # what kite_report --db judges against
+        assert judged == runs[-1] and judged.plant.params.w_ref == 9.0 and judged.h_min == 115.0
+
+        other = replace(flown, params=replace(flown.params, w_ref=9.5))
+        pub = probe.node.create_publisher(String, "/kite/plant_config", LATCHED_10)
+        for text in ('{"dt": "fast"}', "not json", plant_json(other)):     # in order, on one reliable writer
+            pub.publish(String(data=text))
+        assert probe.spin_until(lambda: runs[-1].plant == other, 60.0), "the optimizer stopped taking configurations"
+        assert run_of(stored(db)[0]).plant == other
+        out = stop(opt)
+        assert """rejected plant configuration '{"dt": "fast"}': not a PlantConfig (PlantConfig.dt = 'fast': """ \
+               "expected a number)" in out, out[-3000:]
+        assert "changed during the run" in out and "Traceback" not in out, out[-3000:]
+
+        stop(plant)
+        probe.node.destroy_publisher(pub)
+        runs.clear()
+        opt2 = start_node("optimizer", params, ros_env)          # resumes the run; no plant in the graph
+        assert probe.spin_until(lambda: runs, 120.0), "the restarted optimizer published no /rto/run"
+        assert runs == [RunDescription(runs[0].settings, other)] and run_of(stored(db)[0]).plant == other
+    finally:
+        for proc in (opt, plant, opt2):
+            if proc is not None:
+                stop(proc)
+

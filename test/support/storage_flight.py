@@ -18,6 +18,7 @@ from kite_rto.gma import HistoryStore
 from kite_rto.kite.params import KiteParams
 from kite_rto.rto.builder import make_gma
 from kite_rto.rto.experiment import ExperimentOutcome, ExperimentSpec
+from kite_rto.rto.run import RUN_KEY
 from kite_rto.runtime.optimizer_run import OptimizerRun
 from kite_rto.runtime.run_db import SETTINGS_KEY, open_run_database
 from kite_rto.rto.session import RTOSession
@@ -83,8 +84,12 @@ class Evaluator:
 class Flight:
     """One optimizer process on the database ``db`` (see the module docstring)."""
 
-    def __init__(self, db, fault=None, n_iter: int = 2, timeout: float = 5.0, settings: dict | None = None):
+    def __init__(self, db, fault=None, n_iter: int = 2, timeout: float = 5.0, settings: dict | None = None,
+                 description=None):
+        """``description``: the run's RunDescription, written with its start as the optimizer node does (None: no
+        description)."""
         settings = {"n_laps": 1} if settings is None else settings
+        run_meta = {SETTINGS_KEY: settings, **({RUN_KEY: description.to_dict()} if description is not None else {})}
         self.store, history, _ = open_run_database(db, settings, True, fault=fault)
         self.gma = make_gma(SETTINGS, history=history)
         session = RTOSession(self.gma, ExperimentSpec(n_laps=1, settle_laps=0))
@@ -97,7 +102,8 @@ class Flight:
         self.run = OptimizerRun(self.gma, session, self.store, SETTINGS.box.setpoint_box(), n_iter=n_iter,
                                 logger=self.log, send_setpoints=self.send, sync=lambda stamp: None,
                                 status=lambda: None, finished=self._finished, storage_lost=self._lost,
-                                storage_timeout=timeout, run_meta={SETTINGS_KEY: settings}, clock=lambda: self.clock)
+                                storage_timeout=timeout, run_meta=run_meta, description=description,
+                                clock=lambda: self.clock)
 
     def _finished(self):
         self.finished = True

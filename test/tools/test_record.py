@@ -15,11 +15,16 @@ from rclpy.serialization import serialize_message
 from nav_msgs.msg import Path
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import UInt32
+from std_msgs.msg import String, UInt32
 from visualization_msgs.msg import Marker, MarkerArray
 
 from kite_rto.nodes import topics as T
-from kite_rto.nodes.interface import ns_to_stamp
+from kite_rto.nodes.interface import LATCHED, ns_to_stamp
+from kite_rto.nodes.plant_config import PARAMS as PLANT_PARAMS
+from kite_rto.nodes.plant_config import config_from_params
+from kite_rto.rto.run import RunDescription
+from kite_rto.rto.settings import KiteRTOSettings
+from kite_rto.runtime.run_description import plant_from_json
 from kite_rto.nodes.controller_node import LAP_FIELDS
 from kite_rto.tools.record import (TOPICS, McapRecording, generated_definition, message_definition, type_name)
 from kite_rto.tools.record_time import PER_SAMPLE, SampleGaps, SimLogTime, cdr_stamp
@@ -162,6 +167,8 @@ def test_record_command_on_a_live_graph_and_report(ros_env, tmp_path):
     rec = subprocess.Popen([PY, "-m", "kite_rto.tools.record", "--out", str(out)], env=ros_env,
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=DIE_WITH_PARENT)
     ctrl = plant = None
+    run = RunDescription(KiteRTOSettings()).to_json()          # as an optimizer publishes it (latched)
+    probe.node.create_publisher(String, T.RUN, LATCHED).publish(String(data=run))
     try:
         assert probe.spin_until(lambda: probe.node.count_subscribers(T.STATE) >= 1, 60.0), "recorder not up"
         ctrl = start_node("controller", {}, ros_env)
@@ -182,9 +189,11 @@ def test_record_command_on_a_live_graph_and_report(ros_env, tmp_path):
     assert rec.returncode == 0, err
     assert "Traceback" not in err and f"to {out}" in err
 
-    counts, stamps, log_times, types = {}, {}, [], {}
+    counts, stamps, log_times, types, texts = {}, {}, [], {}, {}
     for m in read_ros2_messages(str(out)):
         topic = T.relative(m.channel.topic)
+        if topic in (T.PLANT_CONFIG, T.RUN):
+            texts[topic] = m.ros_msg.data
         counts[topic] = counts.get(topic, 0) + 1
         types[topic] = m.schema.name
         log_times.append(m.log_time_ns)
@@ -193,7 +202,8 @@ def test_record_command_on_a_live_graph_and_report(ros_env, tmp_path):
             if topic in PER_SAMPLE:
                 assert m.log_time_ns == stamps[topic][-1], topic           # log time = simulated time
     assert min(log_times) == 0 and max(log_times) >= 42 * 10**9 - 20_000_000            # the simulated span
-    expected = {T.CLOCK, T.STATE, T.POSITION, T.TENSION, T.WIND, T.STEERING, T.LAPS, T.REFERENCE_PATH, T.CRASHES}
+    expected = {T.CLOCK, T.STATE, T.POSITION, T.TENSION, T.WIND, T.STEERING, T.LAPS, T.REFERENCE_PATH, T.CRASHES,
+                T.PLANT_CONFIG, T.RUN}
     assert expected <= set(counts), counts
     assert {t: types[t] for t in (T.STATE, T.LAPS, T.CRASHES, T.REFERENCE_PATH)} == {
         T.STATE: "sensor_msgs/msg/JointState", T.LAPS: "sensor_msgs/msg/JointState",
@@ -226,6 +236,8 @@ def test_record_command_on_a_live_graph_and_report(ros_env, tmp_path):
         meta = {m.name: m.metadata for m in reader.iter_metadata()}
     assert summary.statistics.message_count == sum(counts.values())
     assert meta["kite_record"]["log_time"] == "sim"
+    assert meta["kite_rto_run"] == {"description": run} and texts[T.RUN] == run            # the run it recorded
+    assert plant_from_json(texts[T.PLANT_CONFIG]) == config_from_params({p.name: p.default for p in PLANT_PARAMS})
     assert meta["/plant"]["duration"] == "42.0" and meta["/plant"]["wait_subscribers"] == "2"   # the graph's parameters
     assert meta["/controller"]["k_psi"] and "re-published samples skipped" in err
 
