@@ -46,9 +46,9 @@ class SetpointRate:
 
     ``logger`` has ``warning``; ``publishers()`` lists the publishers of /rto/setpoints
     (:class:`~.sources.Publisher`), asked while the setpoints change (at most every :data:`LOOK_PERIOD` wall s);
-    ``source``: the controller's ``setpoint_source`` (fully
-    qualified) or None; ``clock`` gives wall seconds. :meth:`message` takes each valid message (cheap),
-    :meth:`flight` the flight time of each answered sample. :attr:`warnings` counts the warnings.
+    ``source``: the controller's ``setpoint_source`` (fully qualified) or None; ``clock`` gives wall seconds.
+    :meth:`message` takes each valid message (cheap), :meth:`flight` the flight time of each answered sample.
+    :attr:`warnings` counts the warnings.
     """
 
     def __init__(self, logger, publishers=lambda: [], source: str | None = None, clock=time.monotonic,
