@@ -13,6 +13,10 @@ sender, so while any other node publishes /rto/setpoints, and for :data:`~.sourc
 message is ignored (throttled warning naming those nodes; the rule is :class:`~.sources.SourceGuard`), and
 :attr:`refresh` asks the node to subscribe again once the configured source is alone, to get its latched
 setpoints.
+
+Rate: every checked message also goes to :attr:`SetpointInbox.rate` (:class:`~.setpoint_rate.SetpointRate`), which
+warns when the setpoints change faster than the path can follow, naming the publishers; the loop tells it the
+flight time of each answered sample (:meth:`SetpointInbox.flown`).
 """
 from __future__ import annotations
 
@@ -20,6 +24,7 @@ import math
 import time
 
 from ..flight.path import Setpoints, SetpointError, setpoints_in_box
+from .setpoint_rate import SetpointRate
 from .sources import SourceGuard
 
 __all__ = ["SetpointInbox", "StartupWait", "SUMMARY_PERIOD", "SETPOINTS_GRACE", "SETPOINTS_WAIT", "fmt_setpoints"]
@@ -44,8 +49,9 @@ class SetpointInbox:
     ``box``: the accepted :class:`~kite_rto.flight.path.SetpointBox`; ``reject(key, text)``: throttled warnings
     (RejectLog); ``logger`` has ``info``/``warning``; ``clock``: wall s; ``source``: the only node whose setpoints
     apply (fully qualified, e.g. ``/optimizer``), None for any; ``publishers()``: the current publishers of
-    /rto/setpoints (:class:`~.sources.Publisher` list) and ``matched()`` the number the subscription is matched
-    with, asked only when ``source`` is set (:attr:`guard`).
+    /rto/setpoints (:class:`~.sources.Publisher` list), asked when ``source`` is set (:attr:`guard`) and when the
+    setpoints change too fast (:attr:`rate`), and ``matched()`` the number the subscription is matched with, asked
+    only when ``source`` is set.
     """
 
     def __init__(self, box, logger, reject, clock=time.monotonic, source: str | None = None,
@@ -53,6 +59,7 @@ class SetpointInbox:
         self.box, self.log, self.reject, self._clock = box, logger, reject, clock
         self.source, self.period = source, period
         self.guard = None if source is None else SourceGuard(source, publishers, matched, clock)
+        self.rate = SetpointRate(logger, publishers, source, clock)
         self._latest = None                 # latest checked message (rad, theta_0, A_phi, A_theta), not yet taken
         self._latest_at = -math.inf         # its arrival, wall s (only with a source restriction)
         self._held = 0                      # checked messages since the last take
@@ -82,6 +89,7 @@ class SetpointInbox:
             return None
         self._latest = c
         self._held += 1
+        self.rate.message(c)
         if self.guard is not None:
             self._latest_at = self.guard.arrived()
         return c
@@ -102,6 +110,10 @@ class SetpointInbox:
             self._ignored_at = now
             self.log.warning(f"ignoring /rto/setpoints: {why} ({self.ignored} messages ignored so far)")
         return None
+
+    def flown(self, stamp: int) -> None:
+        """The loop answered the sample stamped ``stamp`` (ns of flight): the rate of changes moves on."""
+        self.rate.flight(stamp * 1e-9)
 
     def applied_change(self, c: Setpoints) -> None:
         """The loop now flies ``c``: logged at once unless a line was logged less than a period ago."""

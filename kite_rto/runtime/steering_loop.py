@@ -13,7 +13,8 @@ the timeline served is alive (:class:`~.sources.ServedPlant`): the controller ke
 readings, or readings stamped far from the last sample, are rejected with throttled warnings.
 
 Setpoints (unsynchronized): each /rto/setpoints message is checked cheaply and kept; the latest is applied at the
-next sample (:class:`~.setpoint_inbox.SetpointInbox`: a flood costs at most one change per sample); at start-up
+next sample (:class:`~.setpoint_inbox.SetpointInbox`: a flood costs at most one change per sample; setpoints that change faster
+than the path can follow are warned about, :mod:`~.setpoint_rate`); at start-up
 the loop waits for them before it steers (:class:`~.setpoint_inbox.StartupWait`). The reference path is published
 after the answer, at most every :data:`PATH_PERIOD` s.
 
@@ -209,6 +210,7 @@ class SteeringLoop:
         delta = self.controller.command(m)
         self.timeline.last, self._last_delta = stamp, delta
         self._answer(stamp, delta)
+        self.inbox.flown(stamp)
         if self._path_due:
             self.publish_path_if_due()
         lap = self.laps.update(m.t, pos[0], pos[1], self._tension, self._altitude,

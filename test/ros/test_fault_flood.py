@@ -1,6 +1,6 @@
 """Fault injection, foreign publishers (issue 18, items 3 and 4, the controller's side): a setpoint flood from a
-second publisher of /rto/setpoints, a second plant on the same domain, and the controller restricted to one
-setpoint source.
+second publisher of /rto/setpoints, a fast setpoint stream from the only publisher, a second plant on the same
+domain, and the controller restricted to one setpoint source.
 
 The real-time loop is measured from DDS timestamps seen by the test's probe: each /kite/state sample's source
 timestamp (when the plant published it) and the received timestamp of the steering answering it (system clock, one
@@ -22,6 +22,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints
+from kite_rto.runtime.setpoint_rate import RATE_LIMIT, RATE_PERIOD, RATE_WINDOW
 from kite_rto.runtime.sources import UNKNOWN_NODE
 from kite_rto.nodes.interface import LATCHED, stamp_to_ns
 
@@ -33,6 +34,9 @@ pytestmark = [pytest.mark.ros, pytest.mark.faults]
 DT_NS = 20_000_000
 DEEP = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)      # the probe must not drop samples
 FLOOD_HZ, FLOOD_S = 500.0, 8.0
+TOO_FAST = "setpoints change faster than the path can follow"
+RATE_TEXT = re.compile(r"(/\w+) \(gid \w+\) changed /rto/setpoints (\d+) times in ([\d.]+) s of flight up to "
+                       r"t = ([\d.]+) s \(([\d.]+) changes per s of flight")
 OPTIMIZER_C = Setpoints.from_degrees(34.0, 50.0, 8.0).as_array().tolist()   # the stand-in optimizer's setpoints
 
 
@@ -116,6 +120,18 @@ def _publish_setpoints(probe, c):
     return pub
 
 
+def _fly_realtime(probe, times, ros_env, tmp_path, procs: list, setpoints=None):
+    """Start the controller and (once the probe published ``setpoints``, if any) the plant in real time; both are
+    appended to ``procs`` (stopped by the caller) and returned once 200 samples were answered."""
+    procs.append(node("controller", "controller", ros_env, tmp_path))
+    assert probe.spin_until(lambda: probe.node.count_publishers("/kite/steering") > 0, 60.0), procs[0].text()
+    if setpoints is not None:
+        _publish_setpoints(probe, setpoints)
+    procs.append(node("plant", "plant", ros_env, tmp_path, {"mode": "realtime", "seed": 5, **QUIET}))
+    assert probe.spin_until(lambda: len(times.steer) > 200, 90.0), procs[1].text()[-2000:]
+    return procs
+
+
 def test_setpoint_flood_does_not_starve_the_realtime_loop(probe, ros_env, request, tmp_path):
     """A foreign node floods /rto/setpoints with alternating valid setpoints at 500 Hz for 8 s while the plant flies
     in real time: the controller coalesces them (at most one change per sample), warns naming the second
@@ -124,23 +140,19 @@ def test_setpoint_flood_does_not_starve_the_realtime_loop(probe, ros_env, reques
                    f"a second node (/intruder) publishes valid /rto/setpoints alternating between two setpoints at "
                    f"{FLOOD_HZ:.0f} Hz for {FLOOD_S:.0f} s while the plant flies in real time (rate 1) and the "
                    "probe (/optimizer) has published the latched setpoints") as row:
-        times = LoopTimes(probe.node)
-        ctrl = node("controller", "controller", ros_env, tmp_path)
-        plant = flood = None
+        times, procs = LoopTimes(probe.node), []
         try:
-            assert probe.spin_until(lambda: probe.node.count_publishers("/kite/steering") > 0, 60.0), ctrl.text()
-            _publish_setpoints(probe, OPTIMIZER_C)
-            plant = node("plant", "plant", ros_env, tmp_path, {"mode": "realtime", "seed": 5, **QUIET})
-            assert probe.spin_until(lambda: len(times.steer) > 200, 90.0), plant.text()[-2000:]
+            ctrl, _ = _fly_realtime(probe, times, ros_env, tmp_path, procs, OPTIMIZER_C)
             cpu = [(time.monotonic(), cpu_seconds(ctrl.pid))]
             probe.spin_until(lambda: False, 3.0)
             cpu.append((time.monotonic(), cpu_seconds(ctrl.pid)))
             flood = _flood(ros_env, tmp_path)
+            procs.append(flood)
             assert probe.spin_until(lambda: flood.count("setpoint_flood summary") > 0, FLOOD_S + 60.0), flood.text()
             cpu.append((time.monotonic(), cpu_seconds(ctrl.pid)))   # includes the flooder's start-up (~1-2 s)
             probe.spin_until(lambda: False, 7.0)             # the controller's next summary (every 5 s)
         finally:
-            stop_all([flood, plant, ctrl])
+            stop_all(procs)
         fl = _flood_summary(flood)
         t0, t1 = fl["t_start_ns"], fl["t_end_ns"]
         before = times.window(t0 - 3_000_000_000, t0)
@@ -151,7 +163,8 @@ def test_setpoint_flood_does_not_starve_the_realtime_loop(probe, ros_env, reques
         row.outcome = (f"flood {fl['sent']} messages at {fl['rate_hz']:.0f} Hz; during it {_fmt(during)} "
                        f"(3 s before: {_fmt(before)}); controller CPU {load[1]:.0f} % of a core from the flooder's "
                        f"start to its end ({load[0]:.0f} % before); load average {os.getloadavg()[0]:.1f}; controller counted {received} setpoint messages and applied "
-                       f"{applied} changes (coalesced at sample boundaries); {len(warned)} warnings naming /intruder; "
+                       f"{applied} changes (coalesced at sample boundaries); {len(warned)} warnings naming /intruder "
+                       f"({ctrl.count(TOO_FAST)} of them: setpoints changing too fast); "
                        f"'new setpoints' lines {ctrl.count('new setpoints')}")
         row.unsafe_setpoints = 0                            # both flooded setpoints are valid: nothing unsafe
         assert warned and "/optimizer" in warned[0], ctrl.text()[-3000:]
@@ -160,6 +173,49 @@ def test_setpoint_flood_does_not_starve_the_realtime_loop(probe, ros_env, reques
         # Generous bound: 50 % is what the unfixed controller managed; the measured value is in the row (target
         # >= 99 %, p99 < 20 ms on an idle machine: docs/interface.md).
         assert during["n"] > 100 and during["answered"] > 0.5, row.outcome
+
+
+def test_a_fast_setpoint_stream_from_one_node_is_warned_about(probe, ros_env, request, tmp_path):
+    """The only publisher of /rto/setpoints streams valid setpoints, alternating, at 500 Hz for 8 s while the plant
+    flies in real time: the controller answers the samples and warns once per interval of flight (RATE_PERIOD s),
+    naming the node and the rate of changes. The warnings are counted per interval of flight (the stamps in their
+    text), so the verdict does not depend on the machine's speed."""
+    with fault_row(request, "fast setpoint stream from the only publisher (controller, real time)",
+                   f"one node (/streamer), the only publisher of /rto/setpoints, publishes valid setpoints "
+                   f"alternating between two at {FLOOD_HZ:.0f} Hz for {FLOOD_S:.0f} s while the plant flies in real "
+                   "time (rate 1)") as row:
+        times, procs = LoopTimes(probe.node), []
+        try:
+            ctrl, _ = _fly_realtime(probe, times, ros_env, tmp_path, procs)
+            flood = _flood(ros_env, tmp_path, name="streamer")
+            procs.append(flood)
+            assert probe.spin_until(lambda: flood.count("setpoint_flood summary") > 0, FLOOD_S + 60.0), flood.text()
+            # the interval opened by the first change closes RATE_PERIOD s of flight later (real time: wall s)
+            probe.spin_until(lambda: ctrl.count(TOO_FAST) > 0, 2 * RATE_PERIOD + 30.0)
+            probe.spin_until(lambda: False, RATE_PERIOD / 2)    # a second warning would need changes after it
+        finally:
+            stop_all(procs)
+        fl = _flood_summary(flood)
+        during = times.window(fl["t_start_ns"], fl["t_end_ns"])
+        received, applied = _summaries(ctrl.lines)
+        warned = ctrl.matching(TOO_FAST)
+        found = [RATE_TEXT.search(w) for w in warned]
+        parsed = [(m.group(1), int(m.group(2)), float(m.group(3)), float(m.group(4)), float(m.group(5)))
+                  for m in found if m]
+        ends = [t for *_, t, _ in parsed]
+        row.outcome = (f"{fl['sent']} messages at {fl['rate_hz']:.0f} Hz; during it {_fmt(during)}; controller "
+                       f"counted {received} setpoint messages and applied {applied} changes; {len(warned)} warnings "
+                       "'setpoints change faster than the path can follow' (" + "; ".join(
+                           f"{who}: {n} changes in {span:.1f} s of flight up to t = {t:.1f} s, {rate:.1f} per s"
+                           for who, n, span, t, rate in parsed) + f"), limit {RATE_LIMIT} changes per "
+                       f"{RATE_WINDOW:g} s of flight; 'new setpoints' lines {ctrl.count('new setpoints')}")
+        row.unsafe_setpoints = 0                            # both streamed setpoints are valid: nothing unsafe
+        assert warned and len(parsed) == len(warned), ctrl.text()[-3000:]
+        assert all(who == "/streamer" for who, *_ in parsed)
+        assert all(b - a >= RATE_PERIOD for a, b in zip(ends, ends[1:]))         # at most one per interval
+        assert all(n > RATE_LIMIT and abs(rate - n / span) <= 0.1 for _, n, span, _, rate in parsed)
+        assert sum(n for _, n, *_ in parsed) <= fl["sent"]                         # changes of what was sent
+        assert during["n"] > 100 and during["answered"] >= 0.99, row.outcome
 
 
 def _log_time(line: str) -> float:
