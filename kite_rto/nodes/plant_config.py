@@ -102,6 +102,9 @@ PARAMS = (
               100, unit="subscribers", runtime=True),
     ParamSpec("resend_period", 0.2, "lockstep: wall time before an unanswered sample is re-published", 0.005, 10.0,
               unit="s (wall)", runtime=True),
+    ParamSpec("recorder_timeout", 30.0, "lockstep: wall time the plant waits for a lossless recorder (kite_record "
+              "--lossless) that lags before it goes on without it (the recording then says where it misses samples)",
+              0.1, 86400.0, unit="s (wall)"),
     ParamSpec("one_plant_check", True, "refuse to start (exit 2) where another plant already publishes /kite/state "
               "or /clock; false starts anyway (to see what the other nodes do; two kites: use two domains)"),
 )

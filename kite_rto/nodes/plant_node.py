@@ -12,7 +12,8 @@ Real time also measures the lag of the steering commands and lowers a ``rate_fac
 (:mod:`kite_rto.runtime.pace`). One plant per graph: a plant refuses to start where another one runs, and warns when a
 second publisher of its topics appears (:mod:`kite_rto.nodes.plant_guard`). At start-up it publishes what it
 simulates on ``/kite/plant_config`` (latched: its :class:`~kite_rto.kite.plant.PlantConfig` as JSON), which the
-optimizer stores in its run's description.
+optimizer stores in its run's description. In lockstep it also waits for lossless recorders (``kite_record
+--lossless``: :mod:`kite_rto.runtime.recorder_gate`), at most ``recorder_timeout`` s at a time.
 """
 from __future__ import annotations
 
@@ -24,18 +25,19 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
-from std_msgs.msg import String, UInt32
+from std_msgs.msg import Header, String, UInt32
 
 from ..kite.plant import KitePlant
 from ..runtime.pace import RealtimePacer
+from ..runtime.recorder_gate import WINDOW_SAMPLES, RecorderGate
 from ..runtime.run_description import plant_json
 from ..runtime.sample_join import RejectLog
 from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, finite_floats, ns_to_stamp, stamp_to_ns
 from .parameters import declare_params
 from .plant_config import PARAMS, config_from_params
-from .plant_guard import WATCH_PERIOD, SecondPublisherWatch, refuse_if_another_plant
+from .plant_guard import WATCH_PERIOD, SecondPublisherWatch, full_name, refuse_if_another_plant
 from .spin import request_exit, run_node
-from .topics import CLOCK, CRASHES, PLANT_CONFIG, POSITION, STATE, STEERING, TENSION, WIND
+from .topics import CLOCK, CRASHES, PLANT_CONFIG, POSITION, RECORDED, STATE, STEERING, TENSION, WIND
 
 FLUSH_TIMEOUT = 60.0
 """Wall s the plant waits at the end of its ``duration`` for readers to acknowledge its last samples."""
@@ -98,7 +100,14 @@ class PlantNode(Node):
         self.pub_config = self.create_publisher(String, PLANT_CONFIG, LATCHED)    # what the plant is, for the
         self.pub_config.publish(String(data=plant_json(self.plant.config)))      # optimizer's run description
         self.create_subscription(JointState, STEERING, self.steering_callback, RELIABLE_10)
-        self._finished = False
+        self._gate = None                  # lockstep: the lossless recorders the next sample waits for
+        if self._lockstep:
+            self.create_subscription(Header, RECORDED, self.recorded_callback, RELIABLE_10)
+            self._gate = RecorderGate(WINDOW_SAMPLES * self._dt_ns, self.p["recorder_timeout"], clock=time.monotonic,
+                                      log=self.get_logger(), recorders=self._recorders)
+        self._held = None                  # a command whose step waits for a lossless recorder
+        self._finished = False             # the duration is reached: no more steps
+        self._exiting = False
         self._first_answer = None          # (wall time, step) of the first accepted command: throughput log
         self._delta = 0.0                 # last valid command (realtime zero-order hold)
         self._last_command = time.monotonic()
@@ -174,7 +183,27 @@ class PlantNode(Node):
         self._delta = values[0]
         self._command_received()
         if self._lockstep:
-            self.advance(self._delta)
+            self._step(self._delta)
+
+    def recorded_callback(self, msg: Header) -> None:
+        """A lossless recorder has written every sample through ``msg.stamp``; a held step may go on."""
+        self._gate.ack(msg.frame_id, stamp_to_ns(msg.stamp), self.plant.k * self._dt_ns)
+        if self._finished:
+            self._end()
+        elif self._held is not None:
+            self._step(self._held)
+
+    def _recorders(self) -> set:
+        """The nodes that publish /kite/recorded now."""
+        return {full_name(i) for i in self.get_publishers_info_by_topic(self.resolve_topic_name(RECORDED))}
+
+    def _step(self, delta: float) -> None:
+        """Lockstep: advance with ``delta``, unless a lossless recorder lags a window behind (then hold it)."""
+        if not self._gate.may_publish((self.plant.k + 1) * self._dt_ns):
+            self._held = delta
+            return
+        self._held = None
+        self.advance(delta)
 
     def _waiting_log(self) -> None:
         self.get_logger().info(f"waiting for {self.p['wait_subscribers']} subscribers of /kite/state "
@@ -191,6 +220,10 @@ class PlantNode(Node):
         ``command_timeout`` s have passed without a command, it flies neutral and keeps its clock going.
         """
         if self._finished:
+            self._end()
+            return
+        if self._held is not None:         # the sample is answered; its step waits for a recorder
+            self._step(self._held)
             return
         now = time.monotonic()
         silent = now - self._last_command
@@ -242,8 +275,19 @@ class PlantNode(Node):
             self._finished = True
             self.get_logger().info(f"duration reached at t = {m.t:.2f} s; crashes: {m.crashes}; "
                                    f"{self._throughput()}")
-            self._flush()
-            request_exit(self, 0)          # SystemExit under rclpy.spin; a flag under run_node's events loop
+            self._end()
+
+    def _end(self) -> None:
+        """After the last sample: once every lossless recorder has written it (lockstep; at most
+        ``recorder_timeout`` s), wait for the readers' acknowledgements and exit."""
+        if self._exiting:
+            return
+        last = self.plant.k * self._dt_ns
+        if self._gate is not None and not self._gate.may_publish(last + self._gate.window_ns):
+            return                         # a recorder has not written the last sample yet: the next ack or tick
+        self._exiting = True
+        self._flush()
+        request_exit(self, 0)              # SystemExit under rclpy.spin; a flag under run_node's events loop
 
     def _flush(self) -> None:
         """Before exiting: wait (at most FLUSH_TIMEOUT wall s) until every reader has acknowledged every sample, so

@@ -10,7 +10,7 @@ from ..runtime.optimizer_sync import SYNC_NAMES
 
 __all__ = ["CLOCK", "STATE", "POSITION", "TENSION", "WIND", "STEERING", "SETPOINTS", "STATUS", "SYNC", "SYNC_NAMES",
            "REFERENCE_PATH", "LAPS", "CRASHES", "WIND_ESTIMATE", "MARKERS", "MANUAL_SETPOINTS", "PLANT_CONFIG",
-           "RUN", "ALL", "graph_name", "relative"]
+           "RUN", "RECORDED", "ALL", "graph_name", "relative"]
 
 CLOCK = "clock"                      # in the root namespace /clock, as use_sim_time and `ros2 topic echo` expect
 STATE = "kite/state"
@@ -28,10 +28,11 @@ LAPS = "kite/laps"
 CRASHES = "kite/crashes"
 PLANT_CONFIG = "kite/plant_config"   # the plant's PlantConfig as JSON (std_msgs/String, latched), once at start-up
 RUN = "rto/run"                      # the optimizer's run description as JSON (std_msgs/String, latched)
+RECORDED = "kite/recorded"           # a lossless recorder's acknowledgement (std_msgs/Header: written through stamp)
 MARKERS = "kite/markers"             # kite_viz (kite_rto.tools.viz): the 3-D scene, visualization_msgs/MarkerArray
 
 ALL = (CLOCK, STATE, POSITION, TENSION, WIND, WIND_ESTIMATE, STEERING, SETPOINTS, STATUS, SYNC, MANUAL_SETPOINTS,
-       REFERENCE_PATH, LAPS, CRASHES, MARKERS, PLANT_CONFIG, RUN)
+       REFERENCE_PATH, LAPS, CRASHES, MARKERS, PLANT_CONFIG, RUN, RECORDED)
 """Every topic of the graph (relative names)."""
 
 

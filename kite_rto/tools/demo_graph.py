@@ -90,7 +90,7 @@ def start_recorder(args, log, env, rec, procs) -> int:
     if args.record:
         Path(args.record).resolve().parent.mkdir(parents=True, exist_ok=True)
         _start_listener("record", [sys.executable, "-m", "kite_rto.tools.record", "--out", str(args.record),
-                                   *_ns(args)], log, env, rec, procs)
+                                   "--lossless", *_ns(args)], log, env, rec, procs)
         extra += 1
     if args.record or getattr(args, "viz", False):
         # recording: one scene per 0.1 s of the flight, however fast the lockstep loop runs (no wall-rate cap);
@@ -100,7 +100,8 @@ def start_recorder(args, log, env, rec, procs) -> int:
         extra += 1
         print("  3-D scene on /kite/markers (kite_viz; RViz2 or Foxglove, fixed frame anchor)", flush=True)
     if args.record:
-        print(f"  recording every topic to {args.record} (log time = simulated time)", flush=True)
+        print(f"  recording every topic to {args.record} (log time = simulated time; lossless: the lockstep plant "
+              "waits for the recorder)", flush=True)
     return extra
 
 

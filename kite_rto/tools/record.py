@@ -13,7 +13,9 @@ is deserialized or re-encoded).
 Log time = simulated time (``--log-time sim``, the default): a message's header stamp, or the latest ``/clock`` for
 one without (rule in :mod:`kite_rto.tools.record_time`), so Foxglove's and PlotJuggler's timeline is the flight's;
 publish time = wall receive time (ns). ``--log-time wall`` logs the wall receive time instead, as ``ros2 bag
-record`` without ``--use-sim-time``. Each sample is recorded once (the lockstep plant's re-publications of a sample
+record`` without ``--use-sim-time``. ``--lossless``: the recorder acknowledges on ``/kite/recorded`` the simulated time
+up to which it has written every sample of the plant's topics, and a lockstep plant waits for it
+(:mod:`kite_rto.runtime.recorder_gate`): nothing is lost however busy the machine (the real-time plant never waits). Each sample is recorded once (the lockstep plant's re-publications of a sample
 are skipped); samples that never arrived are counted and reported (the ``wrote`` line and a ``kite_record_gaps``
 metadata record: per topic the number missing and the largest gap). The parameters of every node in the graph are
 stored as MCAP ``Metadata`` records, one per node (name = the node's full name, e.g. ``/plant``; fetched through its
@@ -39,15 +41,16 @@ from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from rclpy.serialization import deserialize_message
-from std_msgs.msg import String, UInt32
+from std_msgs.msg import Header, String, UInt32
 from visualization_msgs.msg import MarkerArray
 
 from ..nodes import topics as T
 from ..nodes.namespace import add_namespace_option, namespace_args
-from ..nodes.interface import LAP_HISTORY, LATCHED, MEASUREMENTS, RELIABLE_10
+from ..nodes.interface import LAP_HISTORY, LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp
 from ..nodes.spin import request_exit, run_node
 from .graph_params import GraphParameters
 from .mcap_writer import McapRecording, generated_definition, message_definition, qos_yaml, type_name
+from ..runtime.recorder_gate import WINDOW_SAMPLES
 from .record_time import LOG_TIME_MODES, PER_SAMPLE, SampleGaps, SimLogTime
 
 __all__ = ["TOPICS", "RUN_METADATA", "topic_type", "type_name", "message_definition", "generated_definition",
@@ -71,8 +74,12 @@ TOPICS: dict = {
     T.MARKERS: (MarkerArray, RELIABLE_10),
     T.PLANT_CONFIG: (String, LATCHED),
     T.RUN: (String, LATCHED),
+    T.RECORDED: (Header, RELIABLE_10),
 }
 """Every project topic -> (message class, QoS its publisher offers). A test checks it covers ``nodes.topics``."""
+
+PLANT_TOPICS = (T.CLOCK, T.STATE, T.POSITION, T.TENSION, T.WIND)
+"""The plant's per-sample topics: a lossless recorder acknowledges the samples it has written of every one of them."""
 
 RUN_METADATA = "kite_rto_run"
 """Name of the metadata record that holds the last ``/rto/run`` description heard (key ``description``: JSON)."""
@@ -99,14 +106,18 @@ class RecordNode:
     """Raw subscriptions on ``node``, one per topic (QoS matched to its publishers, deep queues), that write every
     message to a :class:`McapRecording` as it arrives: log time by :class:`~kite_rto.tools.record_time.SimLogTime`
     (``log_time`` = ``sim`` or ``wall``), publish time = wall receive time; re-published samples skipped. The last
-    ``/rto/run`` message is kept for :meth:`run_description`."""
+    ``/rto/run`` message is kept for :meth:`run_description`. ``ack(stamp_ns)``: called when every sample of the
+    plant's topics through ``stamp_ns`` has been written (at least every tenth of the plant's window; None: never)."""
 
-    def __init__(self, node, recording: McapRecording, topics, depth: int = 1000, log_time: str = "sim"):
+    def __init__(self, node, recording: McapRecording, topics, depth: int = 1000, log_time: str = "sim", ack=None):
         self.node = node
         self.recording = recording
         self.started = time.monotonic()
         self.clock = SimLogTime({t: type_name(TOPICS[t][0]) for t in topics}, log_time)
         self._last_run = None               # CDR bytes of the last /rto/run message
+        self._ack = ack
+        self._acked = None                  # the stamp last acknowledged (ns)
+        self._plant_topics = [t for t in PLANT_TOPICS if t in topics]
         for topic in topics:
             cls, offered = TOPICS[topic]
             recording.add_topic(topic, cls, offered)
@@ -122,9 +133,24 @@ class RecordNode:
             t = log_time(topic, data, wall)
             if t is not None:
                 write(topic, data, t, wall)
+                if self._ack is not None and topic in PLANT_TOPICS:
+                    self.acknowledge(final=False)
             if topic == T.RUN:
                 self._last_run = data
         return callback
+
+    def acknowledge(self, final: bool = True) -> None:
+        """Acknowledge the samples written through the oldest latest stamp of the plant's topics, when it has moved
+        on by a tenth of the plant's window (``final``: whenever it has moved on at all)."""
+        stamps = [self.clock.last_stamp(t) for t in self._plant_topics]
+        if not stamps or None in stamps:
+            return
+        through = min(stamps)
+        period = self.clock.gaps.period_ns(self._plant_topics[0]) or 0
+        step = 1 if final else max(1, period * (WINDOW_SAMPLES // 10))
+        if self._acked is None or through - self._acked >= step:
+            self._acked = through
+            self._ack(through)
 
     def run_description(self) -> str | None:
         """The JSON text of the last ``/rto/run`` message recorded (None: none came)."""
@@ -136,9 +162,14 @@ def _make_node(args):
         def __init__(self):
             super().__init__("kite_record")
             self.recording = McapRecording(args.out, use_files=not args.no_msg_files)
-            self.rec = RecordNode(self, self.recording, args.topics, log_time=args.log_time)
+            ack = None
+            if args.lossless:
+                self.pub_ack = self.create_publisher(Header, T.RECORDED, RELIABLE_10)
+                ack = self._acknowledge
+            self.rec = RecordNode(self, self.recording, args.topics, log_time=args.log_time, ack=ack)
             self.recording.add_metadata("kite_record", {
                 "log_time": args.log_time, "publish_time": "wall receive time",
+                "lossless": "yes: a lockstep plant waits for this recorder" if args.lossless else "no",
                 "topics": " ".join(map(T.graph_name, args.topics)),
                 "started_wall": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                 "ros_domain_id": os.environ.get("ROS_DOMAIN_ID", "0"), "namespace": self.get_namespace(),
@@ -147,8 +178,14 @@ def _make_node(args):
                 self.params = GraphParameters(self, self.recording.add_metadata)
             self.get_logger().info(f"recording {len(args.topics)} topics of {self.get_namespace()} to {args.out}"
                                    + (f" for {args.duration:g} s" if args.duration else " until Ctrl-C"))
+            steady = RclClock(clock_type=ClockType.STEADY_TIME)
             if args.duration:
-                self.create_timer(0.1, self._check, clock=RclClock(clock_type=ClockType.STEADY_TIME))
+                self.create_timer(0.1, self._check, clock=steady)
+            if args.lossless:       # what the step rule holds back, acknowledged within 0.1 s
+                self.create_timer(0.1, self.rec.acknowledge, clock=steady)
+
+        def _acknowledge(self, stamp_ns: int) -> None:
+            self.pub_ack.publish(Header(stamp=ns_to_stamp(stamp_ns), frame_id=self.get_fully_qualified_name()))
 
         def _check(self):
             if time.monotonic() - self.rec.started >= args.duration:
@@ -187,6 +224,9 @@ def parse_args(argv=None):
     ap.add_argument("--log-time", choices=LOG_TIME_MODES, default="sim",
                     help="sim (default): log time = the message's simulated stamp (or the latest /clock); "
                          "wall: the wall receive time")
+    ap.add_argument("--lossless", action="store_true",
+                    help="a lockstep plant waits for this recorder, so that it loses no sample however busy the "
+                         "machine (acknowledgements on /kite/recorded; the real-time plant never waits)")
     ap.add_argument("--no-params", action="store_true",
                     help="do not store the nodes' parameters as metadata records")
     ap.add_argument("--no-msg-files", action="store_true",

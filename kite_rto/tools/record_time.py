@@ -88,6 +88,10 @@ class SimLogTime:
         self.gaps = SampleGaps()
         self.replaced = 0               # messages logged at the latest /clock instead of their stamp
 
+    def last_stamp(self, topic: str) -> int | None:
+        """The stamp (ns) of the last sample recorded on the per-sample ``topic`` (None before the first)."""
+        return self._last.get(topic)
+
     def log_time(self, topic: str, data: bytes, wall_ns: int) -> int | None:
         """The log time (ns) of ``data`` received on ``topic`` at ``wall_ns``, or None for a duplicate sample."""
         kind = self._offset.get(topic)

@@ -149,7 +149,8 @@ def test_plant_defaults_are_the_plant_config_defaults():
         assert default == (field if isinstance(field, str) else pytest.approx(field, rel=1e-12, abs=0)), (name, path)
     assert config_from_params({s.name: s.default for s in PARAMS}) == config
     assert set(specs) - set(CONFIG_FIELDS) == {"mode", "rate_factor", "seed", "duration", "command_timeout",
-                                               "wait_subscribers", "resend_period", "one_plant_check"}
+                                               "wait_subscribers", "resend_period", "recorder_timeout",
+                                               "one_plant_check"}
 
 
 def test_optimizer_defaults_build_the_kite_defaults_and_gma_parameters_reach_gma():

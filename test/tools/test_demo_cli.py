@@ -166,13 +166,11 @@ def test_short_fly_run_with_recording(ros_env, tmp_path):
     with open(mcap, "rb") as f:
         s = make_reader(f).get_summary()
     counts = {ch.topic: s.statistics.channel_message_counts.get(cid, 0) for cid, ch in s.channels.items()}
-    # 2101 samples (0 .. 42 s); a recorder starved of CPU may miss some (see test_record.py), and then says how many
+    # 2101 samples (0 .. 42 s), every one of them: the demo's recorder is lossless (the lockstep plant waits for it)
     with open(mcap, "rb") as f:
         gaps = {m.name: m.metadata for m in make_reader(f).iter_metadata()}["kite_record_gaps"]
-    missing = int(gaps.get("/kite/state", "0 missing").split(" missing")[0])
-    assert counts["/kite/state"] + missing >= 2100 and counts["/kite/laps"] == summary["laps"], gaps
-    assert ("no sample missing" in res.stdout) == (not missing) and gaps.get("all") == (
-        None if missing else "no sample missing")
+    assert counts["/kite/state"] == 2101 and gaps == {"all": "no sample missing"}, (counts, gaps)
+    assert "no sample missing" in res.stdout and counts["/kite/laps"] == summary["laps"]
     assert not tagged_processes(env)
     # The recording of the main job on simulated time: it decodes with mcap_ros2, its log times span the flight
     # (0 .. 42 s), each sample is in it once, the 3-D scene (kite_viz) is in it, and so are the nodes' parameters.

@@ -15,7 +15,7 @@ from rclpy.serialization import serialize_message
 from nav_msgs.msg import Path
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import String, UInt32
+from std_msgs.msg import Header, String, UInt32
 from visualization_msgs.msg import Marker, MarkerArray
 
 from kite_rto.nodes import topics as T
@@ -178,14 +178,7 @@ def test_record_command_on_a_live_graph_and_report(ros_env, tmp_path):
         assert plant.returncode == 0
         probe.spin_until(lambda: False, 1.0)
     finally:
-        if plant is not None:
-            stop(plant)
-        if ctrl is not None:
-            stop(ctrl)
-        probe.close()
-        if rec.poll() is None:
-            rec.send_signal(signal.SIGINT)
-        _, err = rec.communicate(timeout=30)
+        err = _stop_all(rec, probe, plant, ctrl)
     assert rec.returncode == 0, err
     assert "Traceback" not in err and f"to {out}" in err
 
@@ -328,3 +321,93 @@ def test_gma_report_from_a_recording(tmp_path):
     assert [r["measured_tension_kN"] for r in summary["rows"]] == [561.0, 562.0, None]
     assert (tmp_path / "r" / "report.png").stat().st_size > 20_000
     assert "not judged on the deterministic plant" in res.stdout
+
+
+def _stop_all(rec, probe, *nodes) -> str:
+    """Stop the nodes and the probe, then the recorder (SIGINT); the recorder's stderr."""
+    for p in nodes:
+        if p is not None:
+            stop(p)
+    probe.close()
+    if rec.poll() is None:
+        rec.send_signal(signal.SIGINT)
+    return rec.communicate(timeout=60)[1]
+
+
+def _lossless_recorder(ros_env, out):
+    return subprocess.Popen([PY, "-m", "kite_rto.tools.record", "--out", str(out), "--lossless", "--topics",
+                             "/clock", "/kite/state", "/kite/position", "/kite/tension", "/kite/wind", "/kite/steering"],
+                            env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True, preexec_fn=DIE_WITH_PARENT)
+
+
+@pytest.mark.ros
+def test_a_lossless_recorder_stopped_for_2_s_in_lockstep_misses_no_sample(ros_env, tmp_path):
+    """The lockstep plant waits for a ``--lossless`` recorder: stopped (SIGSTOP) for 2 s of wall time it misses no
+    sample and records none twice, however fast the machine (the plant's wait is bounded by recorder_timeout only,
+    set far beyond anything this test needs)."""
+    out = tmp_path / "lossless.mcap"
+    probe = Probe("lossless_probe")
+    acks = []
+    probe.node.create_subscription(Header, T.RECORDED, lambda m: acks.append(m), 10)
+    rec = _lossless_recorder(ros_env, out)
+    ctrl = plant = None
+    stopped = False
+    try:
+        assert probe.spin_until(lambda: probe.node.count_subscribers(T.STATE) >= 1, 60.0), "recorder not up"
+        ctrl = start_node("controller", {}, ros_env)
+        assert probe.spin_until(lambda: probe.node.count_publishers(T.STEERING) > 0, 60.0)
+        plant = start_node("plant", {"duration": 30.0, "wait_subscribers": 2, "recorder_timeout": 3600.0}, ros_env)
+        assert probe.spin_until(lambda: any(a.stamp.sec >= 2 for a in acks), 120.0), "no acknowledgement"
+        rec.send_signal(signal.SIGSTOP)
+        stopped = True
+        probe.spin_until(lambda: False, 2.0)
+        rec.send_signal(signal.SIGCONT)
+        stopped = False
+        assert probe.spin_until(lambda: plant.poll() is not None, 300.0), "plant did not finish"
+        assert plant.returncode == 0
+    finally:
+        if stopped:
+            rec.send_signal(signal.SIGCONT)
+        err = _stop_all(rec, probe, plant, ctrl)
+    assert rec.returncode == 0, err
+    assert "no sample missing" in err, err
+    assert acks and all(a.frame_id == "/kite_record" for a in acks)                 # who acknowledged
+    stamps = {}
+    for m in read_ros2_messages(str(out)):
+        topic = T.relative(m.channel.topic)
+        stamps.setdefault(topic, []).append(m.ros_msg.header.stamp.sec * 10**9 + m.ros_msg.header.stamp.nanosec
+                                            if topic != T.CLOCK else m.ros_msg.clock.sec * 10**9 + m.ros_msg.clock.nanosec)
+    expected = list(range(0, 30 * 10**9 + 1, 20_000_000))             # every sample of the flight, once, in order
+    for topic in (T.CLOCK, T.STATE, T.POSITION, T.TENSION, T.WIND):
+        assert stamps[topic] == expected, (topic, len(stamps[topic]), len(expected))
+    with open(out, "rb") as f:
+        meta = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
+    assert meta["kite_record"]["lossless"].startswith("yes") and meta["kite_record_gaps"] == {"all": "no sample missing"}
+
+
+@pytest.mark.ros
+def test_a_stopped_lossless_recorder_never_holds_a_real_time_kite(ros_env, tmp_path):
+    """In real time the plant never waits for a recorder: its clock goes on while the recorder is stopped."""
+    probe = Probe("realtime_probe")
+    clocks = []
+    probe.node.create_subscription(Clock, T.CLOCK, lambda m: clocks.append(m.clock.sec + m.clock.nanosec * 1e-9), 10)
+    rec = _lossless_recorder(ros_env, tmp_path / "rt.mcap")
+    plant = None
+    try:
+        assert probe.spin_until(lambda: probe.node.count_subscribers(T.STATE) >= 1, 60.0), "recorder not up"
+        plant = start_node("plant", {"mode": "realtime", "rate_factor": 5.0}, ros_env)
+        assert probe.spin_until(lambda: clocks and clocks[-1] > 1.0, 60.0)
+        rec.send_signal(signal.SIGSTOP)
+        before = clocks[-1]
+        probe.spin_until(lambda: False, 2.0)
+        during = clocks[-1]
+        rec.send_signal(signal.SIGCONT)
+        assert during > before, (before, during)               # the kite flew on
+    finally:
+        rec.send_signal(signal.SIGCONT)
+        if plant is not None:
+            stop(plant)
+        probe.close()
+        rec.send_signal(signal.SIGINT)
+        rec.communicate(timeout=60)
