@@ -29,7 +29,7 @@ from ..kite.params import ParameterError
 from .interface import RELIABLE_10, stamp_to_ns
 from .topics import CLOCK, STATE
 
-__all__ = ["full_name", "DISCOVERY_WAIT", "ALIVE_WAIT", "WATCH_PERIOD", "WARN_EVERY", "AnotherPlant", "refuse_if_another_plant",
+__all__ = ["DISCOVERY_WAIT", "ALIVE_WAIT", "WATCH_PERIOD", "WARN_EVERY", "AnotherPlant", "refuse_if_another_plant",
            "SecondPublisherWatch"]
 
 DISCOVERY_WAIT = 1.0
@@ -51,8 +51,7 @@ class AnotherPlant(ParameterError):
     """Another node already publishes the plant's topics (the plant refuses to start: exit code 2)."""
 
 
-def full_name(info) -> str:
-    """The full name (``/ns/node``) of the node of a graph endpoint ``info``."""
+def _full_name(info) -> str:
     return f"{info.node_namespace.rstrip('/')}/{info.node_name}"
 
 
@@ -61,7 +60,7 @@ def _names(node: Node, topic: str, wait: float = 1.0) -> str:
     (``_NODE_NAME_UNKNOWN_``): wait up to ``wait`` wall s for the names."""
     end = time.monotonic() + wait
     while True:
-        names = sorted({full_name(i) for i in node.get_publishers_info_by_topic(topic)})
+        names = sorted({_full_name(i) for i in node.get_publishers_info_by_topic(topic)})
         if not any("_UNKNOWN_" in n for n in names) or time.monotonic() >= end:
             return ", ".join(names)
         time.sleep(0.02)
@@ -112,7 +111,7 @@ class SecondPublisherWatch:
 
     def others(self, topic: str) -> list[str]:
         """Full names of the publishers of ``topic`` other than this node's own one (counted once)."""
-        names = [full_name(i) for i in self.node.get_publishers_info_by_topic(topic)
+        names = [_full_name(i) for i in self.node.get_publishers_info_by_topic(topic)
                  if bytes(i.endpoint_gid) not in self.ignore]
         if self.own in names:
             names.remove(self.own)

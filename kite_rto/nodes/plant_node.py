@@ -32,10 +32,11 @@ from ..runtime.pace import RealtimePacer
 from ..runtime.recorder_gate import WINDOW_SAMPLES, RecorderGate
 from ..runtime.run_description import plant_json
 from ..runtime.sample_join import RejectLog
+from ..runtime.sources import node_name
 from .interface import LATCHED, MEASUREMENTS, RELIABLE_10, finite_floats, ns_to_stamp, stamp_to_ns
 from .parameters import declare_params
 from .plant_config import PARAMS, config_from_params
-from .plant_guard import WATCH_PERIOD, SecondPublisherWatch, full_name, refuse_if_another_plant
+from .plant_guard import WATCH_PERIOD, SecondPublisherWatch, refuse_if_another_plant
 from .spin import request_exit, run_node
 from .topics import CLOCK, CRASHES, PLANT_CONFIG, POSITION, RECORDED, STATE, STEERING, TENSION, WIND
 
@@ -195,7 +196,8 @@ class PlantNode(Node):
 
     def _recorders(self) -> set:
         """The nodes that publish /kite/recorded now."""
-        return {full_name(i) for i in self.get_publishers_info_by_topic(self.resolve_topic_name(RECORDED))}
+        return {node_name(i.node_name, i.node_namespace)
+                for i in self.get_publishers_info_by_topic(self.resolve_topic_name(RECORDED))}
 
     def _step(self, delta: float) -> None:
         """Lockstep: advance with ``delta``, unless a lossless recorder lags a window behind (then hold it)."""

@@ -15,9 +15,10 @@ one without (rule in :mod:`kite_rto.tools.record_time`), so Foxglove's and PlotJ
 publish time = wall receive time (ns). ``--log-time wall`` logs the wall receive time instead, as ``ros2 bag
 record`` without ``--use-sim-time``. ``--lossless``: the recorder acknowledges on ``/kite/recorded`` the simulated time
 up to which it has written every sample of the plant's topics, and a lockstep plant waits for it
-(:mod:`kite_rto.runtime.recorder_gate`): nothing is lost however busy the machine (the real-time plant never waits). Each sample is recorded once (the lockstep plant's re-publications of a sample
-are skipped); samples that never arrived are counted and reported (the ``wrote`` line and a ``kite_record_gaps``
-metadata record: per topic the number missing and the largest gap). The parameters of every node in the graph are
+(:mod:`kite_rto.runtime.recorder_gate`): nothing is lost however busy the machine (the real-time plant never
+waits). Each sample is recorded once (the lockstep plant's re-publications of a sample are skipped); samples that
+never arrived are counted and reported (the ``wrote`` line and a ``kite_record_gaps`` metadata record: per topic
+the number missing and the largest gap). The parameters of every node in the graph are
 stored as MCAP ``Metadata`` records, one per node (name = the node's full name, e.g. ``/plant``; fetched through its
 ``get_parameters`` service when the recorder first sees it), one ``kite_record`` record says how the file was
 written, and a ``kite_rto_run`` record (:data:`RUN_METADATA`) holds the last run description heard on ``/rto/run``
@@ -48,9 +49,9 @@ from ..nodes import topics as T
 from ..nodes.namespace import add_namespace_option, namespace_args
 from ..nodes.interface import LAP_HISTORY, LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp
 from ..nodes.spin import request_exit, run_node
+from ..runtime.recorder_gate import WINDOW_SAMPLES
 from .graph_params import GraphParameters
 from .mcap_writer import McapRecording, generated_definition, message_definition, qos_yaml, type_name
-from ..runtime.recorder_gate import WINDOW_SAMPLES
 from .record_time import LOG_TIME_MODES, PER_SAMPLE, SampleGaps, SimLogTime
 
 __all__ = ["TOPICS", "RUN_METADATA", "topic_type", "type_name", "message_definition", "generated_definition",
