@@ -14,6 +14,7 @@ QUICK_FOLDERS = ("kite", "flight", "gma", "rto", "runtime", "campaign")
 """The pure core's folders: their tests start no ROS process and form the quick tier, except :data:`NOT_QUICK`."""
 NOT_QUICK = {
     "test_kite_rto.py", "test_lifecycle_run.py", "test_baselines.py",      # the kite's RTO flown by the pure runner
+    "test_plan_lockstep.py",                                                  # ... and by the lockstep graph
     "test_run_description.py::test_the_plants_configuration_is_stored_with_the_description",    # ... and by the
     "test_run_description.py::test_a_failed_write_of_the_description_keeps_it_and_the_run_goes_on",  # storage
     "test_run_description.py::test_a_bad_configuration_is_rejected_and_the_run_goes_on",        # tests' flight

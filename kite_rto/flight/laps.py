@@ -14,7 +14,7 @@ import numpy as np
 from ..kite.params import check_range
 from .projection import project_samples
 
-__all__ = ["LapStats", "LapDetector"]
+__all__ = ["LapStats", "LapCrossing", "LapDetector"]
 
 
 @dataclass(frozen=True)
@@ -48,6 +48,44 @@ class LapStats:
     n_samples: int
 
 
+class LapCrossing:
+    """Where laps start and end, from ``(t, phi)`` alone: the shared rule of :class:`LapDetector` and of the
+    experiment's end (:class:`~kite_rto.rto.experiment_end.ExperimentEnd`).
+
+    A crossing is an upward zero crossing of phi after phi was below ``-hysteresis`` (rad), at the time
+    interpolated between the two samples around it; a lap (from one crossing to the next) counts if its duration
+    is within ``[min_duration, max_duration]`` s and it holds at least :data:`MIN_SAMPLES` samples.
+    """
+
+    MIN_SAMPLES = 5
+    """Fewest samples of a lap that counts."""
+
+    def __init__(self, hysteresis: float, min_duration: float, max_duration: float):
+        self.hysteresis, self.min_duration, self.max_duration = hysteresis, min_duration, max_duration
+        self.crossed = False              # the last sample crossed zero upwards
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the lap in progress."""
+        self._armed, self._t_cross, self._prev, self._n = False, None, None, 0
+
+    def update(self, t: float, phi: float) -> tuple[float, float] | None:
+        """Add one sample (t s, phi rad); ``(t_start, t_end)`` s of the lap it completes, else None."""
+        prev, self._prev = self._prev, (t, phi)
+        if phi < -self.hysteresis:
+            self._armed = True
+        lap, self.crossed = None, False
+        if self._armed and prev is not None and prev[1] < 0.0 <= phi:
+            t_cross = prev[0] + (t - prev[0]) * (-prev[1]) / (phi - prev[1])
+            self._armed, self.crossed = False, True
+            if self._t_cross is not None and self._n >= self.MIN_SAMPLES \
+                    and self.min_duration <= t_cross - self._t_cross <= self.max_duration:
+                lap = (self._t_cross, t_cross)
+            self._t_cross, self._n = t_cross, 0
+        self._n += 1
+        return lap
+
+
 class LapDetector:
     """Detects laps in a stream of samples and returns their :class:`LapStats`.
 
@@ -67,14 +105,13 @@ class LapDetector:
         self.hysteresis, self.min_duration, self.max_duration = hysteresis, min_duration, max_duration
         self.n_resample = int(n_resample)
         self.laps: list[LapStats] = []
-        self._armed = False
-        self._t_cross = None
-        self._prev = None
+        self.crossing = LapCrossing(hysteresis, min_duration, max_duration)
         self._buf: list[tuple] = []
 
     def reset(self) -> None:
         """Forget the lap in progress (e.g. after a crash or a setpoint change); completed laps are kept."""
-        self._armed, self._t_cross, self._prev, self._buf = False, None, None, []
+        self.crossing.reset()
+        self._buf = []
 
     def update(self, t: float, theta: float, phi: float, tension: float = math.nan, altitude: float = math.nan,
                cross_track: float = math.nan, wind_ref: float = math.nan) -> LapStats | None:
@@ -83,36 +120,29 @@ class LapDetector:
         Returns the :class:`LapStats` of the lap completed by this sample, else None.
         """
         sample = (t, theta, phi, tension, altitude, cross_track, wind_ref)
-        prev, self._prev = self._prev, sample
-        if phi < -self.hysteresis:
-            self._armed = True
+        lap = self.crossing.update(t, phi)
         result = None
-        if self._armed and prev is not None and prev[2] < 0.0 <= phi:
-            t_cross = prev[0] + (t - prev[0]) * (-prev[2]) / (phi - prev[2])
-            self._armed = False
-            if self._t_cross is not None:
-                result = self._close(t_cross, prev, sample)
-            self._t_cross = t_cross
+        if self.crossing.crossed:
+            if lap is not None:
+                result = self._close(*lap, sample)
             self._buf = []
         self._buf.append(sample)
         return result
 
-    def _close(self, t_end: float, prev: tuple, last: tuple) -> LapStats | None:
+    def _close(self, t_start: float, t_end: float, last: tuple) -> LapStats:
         buf = self._buf
-        duration = t_end - self._t_cross
-        if not (self.min_duration <= duration <= self.max_duration) or len(buf) < 5:
-            return None
+        duration = t_end - t_start
         a = np.array(buf, dtype=float)
         t = a[:, 0]
         # boundary samples interpolated at the crossing times
-        tq = self._t_cross + duration * np.arange(self.n_resample) / self.n_resample
+        tq = t_start + duration * np.arange(self.n_resample) / self.n_resample
         theta = np.interp(tq, np.r_[t, last[0]], np.r_[a[:, 1], last[1]])
         phi = np.interp(tq, np.r_[t, last[0]], np.r_[a[:, 2], last[2]])
         tension = np.interp(tq, t, a[:, 3])
         wind_sq = np.interp(tq, t, a[:, 6] ** 2)
         e = a[:, 5]
         stats = LapStats(
-            index=len(self.laps), t_start=self._t_cross, t_end=t_end, duration=duration,
+            index=len(self.laps), t_start=t_start, t_end=t_end, duration=duration,
             mean_tension=float(np.mean(tension)), min_altitude=float(np.min(a[:, 4])),
             rms_cross_track_deg=float(np.degrees(np.sqrt(np.mean(e ** 2)))),
             mean_wind_sq=float(np.mean(wind_sq)),

@@ -3,8 +3,9 @@
 Subscribes the plant's measurements and ``/rto/setpoints`` (reliable + transient-local: a late controller still
 gets the current setpoints); answers every ``/kite/state`` sample on ``/kite/steering`` with the sample's stamp
 (the lockstep handshake); publishes the reference path (nav_msgs/Path, for RViz/Foxglove) and per-lap statistics.
-With ``sync_optimizer:=true`` (lockstep) it answers a sample only after the optimizer's ``/rto/sync`` message for it
-and takes the setpoints from there, so a setpoint change takes effect at the same sample as in the pure runner.
+With ``sync_optimizer:=true`` (lockstep) it follows the optimizer's plans (``/rto/sync``, :mod:`kite_rto.runtime.plan`):
+where the plan says a decision is due it waits for the optimizer's message about that sample and takes the setpoints
+from there, so a setpoint change takes effect at the same sample as in the pure runner.
 All logic is :class:`kite_rto.runtime.steering_loop.SteeringLoop` (join, timeline, restart, setpoints coalesced per
 sample, optimizer sync) around :class:`kite_rto.flight.controller.PathController` and
 :class:`kite_rto.flight.laps.LapDetector`. Every 0.5 s wall it looks at the graph: several publishers of an input
@@ -21,6 +22,7 @@ from nav_msgs.msg import Path
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
+from std_msgs.msg import UInt32
 
 from ..flight.controller import ControllerSettings, PathController
 from ..flight.path import DEFAULT_SETPOINTS, FigureEightPath, SetpointBox, Setpoints, SetpointError
@@ -32,7 +34,7 @@ from .interface import LAP_HISTORY, LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_st
 from .peer_check import PlantAgreement
 from .parameters import ParamSpec, declare_params
 from .spin import run_node
-from .topics import LAPS, POSITION, REFERENCE_PATH, SETPOINTS, STATE, STEERING, SYNC, TENSION, WIND
+from .topics import CRASHES, LAPS, POSITION, REFERENCE_PATH, SETPOINTS, STATE, STEERING, SYNC, TENSION, WIND
 
 __all__ = ["ControllerNode", "PARAMS", "LAP_FIELDS", "main"]
 
@@ -59,9 +61,10 @@ PARAMS = (
     ParamSpec("k_psi", _C.k_psi, "orientation-error gain", 0.01, 100.0, unit="1/s", runtime=True),
     ParamSpec("k_i", _C.k_i, "integral gain: turn rate per integrated cross-track error (rad/s per rad s)",
               0.0, 100.0, unit="1/s^2", runtime=True),
-    ParamSpec("sync_optimizer", False, "lockstep: answer each sample only after the optimizer has processed it "
-              "(/rto/sync) and take the setpoints from there, so the graph flies exactly the pure runner's sequence; "
-              "it waits as long as an optimizer is in the graph, and answers at once when none is"),
+    ParamSpec("sync_optimizer", False, "lockstep: follow the optimizer's plans (/rto/sync): where a decision is due, "
+              "wait until the optimizer has processed the sample and take the setpoints from there, so the graph "
+              "flies exactly the pure runner's sequence; it waits as long as an optimizer is in the graph, and "
+              "answers at once when none is"),
     ParamSpec("setpoint_source", "*", "the only node whose /rto/setpoints apply, fully qualified (e.g. /optimizer): "
               "while another node publishes /rto/setpoints, and 1 s after, every setpoint message is ignored; "
               "* = any publisher"),
@@ -132,7 +135,8 @@ class ControllerNode(Node):
         self.sub_setpoints = None
         self.subscribe_setpoints()
         if self.loop.sync:
-            self.create_subscription(JointState, SYNC, self.sync_callback, RELIABLE_10)
+            self.create_subscription(JointState, SYNC, self.sync_callback, MEASUREMENTS)
+            self.create_subscription(UInt32, CRASHES, lambda msg: self.loop.crash_count(int(msg.data)), LATCHED)
             self.create_timer(0.05, self.loop.watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.plant_agreement = PlantAgreement(self, {n: float(v[n]) for n in PLANT_SHARED},
                                               {s.name: s.unit for s in PARAMS})

@@ -8,15 +8,16 @@ experiment and iteration to an SQLite database, from which a restarted optimizer
 on ``/rto/run`` (latched JSON), with the plant once the plant's ``/kite/plant_config`` arrives (a resumed run keeps
 the stored one until then).
 
-After each plant sample it has processed it publishes ``/rto/sync`` (sensor_msgs/JointState stamped with the sample's
-time: the setpoints in force, rad, and ``updates``, the number of setpoint messages this optimizer has published). A
-controller started with ``sync_optimizer:=true`` answers a sample only after its sync message, so in lockstep a
-setpoint change takes effect at the same sample as in the pure runner and the graph flies the same sequence.
+It hands a controller started with ``sync_optimizer:=true`` its decisions as plans on ``/rto/sync``
+(sensor_msgs/JointState stamped with a sample's time; :mod:`kite_rto.runtime.plan`): the setpoints in force and where
+its next decision can be due (the end of the experiment that starts at that sample). The controller waits only at
+those samples, so in lockstep a setpoint change takes effect at the same sample as in the pure runner and the graph
+flies the same sequence, while the optimizer works beside the plant and the controller rather than between them.
 
 A ROS 2 lifecycle (managed) node (docs/interface.md *Pausing and overriding the optimizer*): ``configure`` opens the
 database and builds the NLPs and directions on a worker thread (services answer meanwhile), ``activate`` starts or
-resumes experiments, ``deactivate`` holds the setpoints in force (the kite keeps flying them; ``/rto/sync`` still
-answers every sample; the experiment in progress is flown again after ``activate``), ``cleanup`` and ``shutdown``
+resumes experiments, ``deactivate`` holds the setpoints in force (the kite keeps flying them; from the end of the
+plan in force on, ``/rto/sync`` answers every sample; the experiment in progress is flown again after ``activate``), ``cleanup`` and ``shutdown``
 close the database (``shutdown`` then ends the process, code 0). While inactive, ``/rto/manual_setpoints``
 (:data:`MANUAL_SETPOINTS`, same type as ``/rto/setpoints``) hands it setpoints to continue from. Every transition
 and manual setpoint is stored in the database's event log; a restarted optimizer whose last ``activate`` /
@@ -246,7 +247,7 @@ class OptimizerNode(LifecycleNode):
         self.wire = wire = RunWire(self)
         self.run = OptimizerRun(self.gma, RTOSession(self.gma, self.settings.experiment, self.settings.max_repeats),
                                 self.store, self.settings.box.setpoint_box(), n_iter=v["n_iter"],
-                                logger=self.get_logger(), send_setpoints=wire.setpoints, sync=wire.sync,
+                                logger=self.get_logger(), send_setpoints=wire.setpoints, processed=wire.processed,
                                 status=self.publish_status, finished=self.finished,
                                 storage_lost=lambda: request_exit(self, STORAGE_EXIT),
                                 storage_timeout=v["storage_timeout"], description=description,

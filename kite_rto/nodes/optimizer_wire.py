@@ -11,7 +11,7 @@ from std_msgs.msg import String, UInt32
 
 from ..flight.path import Setpoints
 from ..runtime.run_status import status_values
-from .interface import LATCHED, LATCHED_10, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
+from .interface import LATCHED, LATCHED_10, MEASUREMENTS, ns_to_stamp, stamp_to_ns
 from .topics import (CRASHES, PLANT_CONFIG, POSITION, RUN, SETPOINTS, STATE, SYNC, SYNC_NAMES, TENSION, WIND,
                      WIND_ESTIMATE)
 
@@ -55,9 +55,9 @@ class RunWire:
 
         def wind(msg: Vector3Stamped):
             run.reading(stamp_to_ns(msg.header.stamp), "wind", msg.vector.x)
-        sub = self._node.create_subscription
-        self._subs = [sub(JointState, STATE, state, RELIABLE_10), sub(WrenchStamped, TENSION, tension, RELIABLE_10),
-                      sub(PointStamped, POSITION, position, RELIABLE_10), sub(Vector3Stamped, WIND, wind, RELIABLE_10),
+        sub = self._node.create_subscription        # deep: the run may fall MAX_LEAD samples behind the plant
+        self._subs = [sub(JointState, STATE, state, MEASUREMENTS), sub(WrenchStamped, TENSION, tension, MEASUREMENTS),
+                      sub(PointStamped, POSITION, position, MEASUREMENTS), sub(Vector3Stamped, WIND, wind, MEASUREMENTS),
                       sub(UInt32, CRASHES, lambda msg: run.crashes(int(msg.data)), LATCHED),
                       sub(String, PLANT_CONFIG, plant_config, LATCHED_10)]
 
@@ -69,11 +69,11 @@ class RunWire:
         msg.position = c
         self._setpoints.publish(msg)
 
-    def sync(self, stamp: int) -> None:
-        """Tell a synchronized controller that the run has processed the sample stamped ``stamp`` (ns):
-        ``/rto/sync`` with the setpoints in force and the count of setpoint messages (none before the first
-        setpoints); before it, the wind the cost normalizes by for it (``/kite/wind_estimate``, m/s at z_ref,
-        ``vector.x``; once per sample, a re-sync repeats none)."""
+    def processed(self, stamp: int, plan) -> None:
+        """The run has processed the sample stamped ``stamp`` (ns): the wind the cost normalizes by for it
+        (``/kite/wind_estimate``, m/s at z_ref, ``vector.x``; once per sample), then, if ``plan`` is not None, that
+        :class:`~kite_rto.runtime.plan.Plan` on ``/rto/sync`` stamped with the sample, for a synchronized
+        controller."""
         run = self.run
         w = run.session.evaluator.wind_estimate
         if math.isfinite(w) and stamp != self._estimate_stamp:
@@ -83,12 +83,12 @@ class RunWire:
             est.header.frame_id = "anchor"
             est.vector.x = float(w)
             self._wind_estimate.publish(est)
-        if run.c_published is None:        # refused the first setpoints: nothing to fly
+        if plan is None:
             return
         msg = JointState()
         msg.header.stamp = ns_to_stamp(stamp)
         msg.name = SYNC_NAMES
-        msg.position = [*run.c_published, float(run.updates)]
+        msg.position = plan.values()
         self._sync.publish(msg)
 
     def description(self, description) -> None:

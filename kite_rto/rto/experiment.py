@@ -21,9 +21,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..flight.laps import LapDetector, LapStats
+from ..flight.laps import LapCrossing, LapDetector, LapStats
 from ..kite.params import KiteParams, check_range
 from ..kite.plant import DEFAULT_WIND_MODEL
+from .experiment_end import CRASHED, TIMED_OUT, ExperimentEnd
 from .wind_source import WIND_SOURCES, make_wind_source
 
 __all__ = ["H_MIN", "ExperimentSpec", "ExperimentOutcome", "ExperimentEvaluator", "PlantFlight", "DEFAULT_WIND_SOURCES",
@@ -174,9 +175,8 @@ class ExperimentEvaluator:
         self.max_duration = self.spec.max_duration
         self.t_start = math.nan
         self.active = False
-        self._crashes = None
+        self.end = None                   # the experiment's ExperimentEnd (from start on)
         self._kept: list[LapStats] = []
-        self._seen = 0
 
     def start(self, t: float, c=None, n_laps: int | None = None) -> None:
         """Begin an experiment at time ``t`` (s), the moment setpoints ``c`` (rad, optional) are applied; it averages
@@ -190,9 +190,10 @@ class ExperimentEvaluator:
         self.c = None if c is None else np.asarray(c, dtype=float).copy()
         self.t_start = float(t)
         self.active = True
-        self._crashes = None
+        sp, d = self.spec, self.laps
+        self.end = ExperimentEnd(self.t_start, self.n_laps, sp.settle_time, sp.settle_laps, self.max_duration,
+                                 LapCrossing(d.hysteresis, d.min_duration, d.max_duration))
         self._kept = []
-        self._seen = 0
         self.laps.reset()
 
     def update(self, m, cross_track: float = math.nan) -> ExperimentOutcome | None:
@@ -201,20 +202,14 @@ class ExperimentEvaluator:
         w = self.wind_estimate = self.wind.update(m)
         if not self.active:
             return None
-        if self._crashes is None:
-            self._crashes = m.crashes
-        elif m.crashes != self._crashes:
+        ended = self.end.update(m.t, m.phi, m.crashes)
+        if ended == CRASHED:
             return self._finish(m.t, crashed=True)
         lap = self.laps.update(m.t, m.theta, m.phi, m.tension, m.position[2], cross_track, w)
-        sp = self.spec
-        if lap is not None and lap.t_start >= self.t_start + sp.settle_time:
-            self._seen += 1
-            if self._seen > sp.settle_laps:
-                self._kept.append(lap)
-                if len(self._kept) >= self.n_laps:
-                    return self._finish(m.t)
-        if m.t - self.t_start >= self.max_duration:
-            return self._finish(m.t, timed_out=True)
+        if self.end.kept:
+            self._kept.append(lap)
+        if ended is not None:
+            return self._finish(m.t, timed_out=ended == TIMED_OUT)
         return None
 
     def _finish(self, t: float, crashed: bool = False, timed_out: bool = False) -> ExperimentOutcome:

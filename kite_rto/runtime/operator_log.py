@@ -9,11 +9,21 @@ Two kinds of events, written by the optimizer node (lifecycle transitions) and :
   or null}``, stored in the same transaction as the open iteration's new requests.
 
 :func:`was_paused` tells a restarted optimizer whether its run was paused: the last ``activate`` or ``deactivate``
-it stored was a ``deactivate`` (a node stopped or shut down while inactive stays paused).
+it stored was a ``deactivate`` (a node stopped or shut down while inactive stays paused). :func:`setpoints_error`
+checks an operator's setpoints as GMA's own are checked.
 """
 from __future__ import annotations
 
-__all__ = ["MANUAL", "TRANSITION", "transition_event", "was_paused"]
+import math
+
+import numpy as np
+
+from ..flight.path import SetpointError, validate_setpoints
+from ..flight.shape import shape_from_setpoints
+from ..kite.params import KiteParams
+from .run_status import degrees
+
+__all__ = ["MANUAL", "TRANSITION", "transition_event", "was_paused", "setpoints_error"]
 
 TRANSITION = "transition"
 MANUAL = "manual_setpoints"
@@ -31,3 +41,23 @@ def was_paused(events) -> bool:
         if kind == TRANSITION and data.get("transition") in ("activate", "deactivate"):
             return data["transition"] == "deactivate"
     return False
+
+
+def setpoints_error(c, box, lb, ub) -> str:
+    """Why an operator's setpoints ``c`` = (theta_0, A_phi, A_theta) rad are refused ("" if they are not): outside
+    the safe ``box`` or the turn limit, or their shape coordinates (theta_0 rad, A_phi rad, aspect) outside the
+    optimizer's box ``[lb, ub]``."""
+    try:
+        c = np.asarray(c, dtype=float)
+        if c.shape != (3,):
+            raise SetpointError(f"setpoints = {c.tolist()}: expected 3 values (theta_0, A_phi, A_theta) rad")
+        validate_setpoints(c, box, KiteParams())
+    except (SetpointError, ValueError, TypeError) as err:
+        return str(err)
+    x = shape_from_setpoints(c)
+    for name, v, lo, hi, deg in zip(("theta_0", "A_phi", "aspect"), x, lb, ub, (True, True, False)):
+        if not lo <= v <= hi:
+            f = (lambda a: f"{math.degrees(a):.4g} deg") if deg else (lambda a: f"{a:.4g}")
+            return (f"setpoints {degrees(c)}: shape coordinate {name} = {f(v)}: outside the optimizer's box "
+                    f"[{f(lo)}, {f(hi)}]")
+    return ""

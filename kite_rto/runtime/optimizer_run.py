@@ -3,7 +3,8 @@
 :class:`OptimizerRun` takes the plant's readings (stamps in integer ns) and crash counts as plain values, drives
 :class:`~kite_rto.rto.session.RTOSession` (the same per-sample logic as the pure runner), writes every finished
 experiment and iteration to a :class:`~kite_rto.gma.HistoryStore`, and reports through callbacks:
-``send_setpoints(c)`` (checked setpoints, rad), ``sync(stamp_ns)`` after each processed sample, ``status()`` when
+``send_setpoints(c)`` (checked setpoints, rad), ``processed(stamp_ns, plan)`` after each processed sample (``plan``:
+the :class:`~kite_rto.runtime.plan.Plan` to send on /rto/sync stamped with it, or None), ``status()`` when
 the status changed, ``finished()`` once ``n_iter`` iterations are done, ``storage_lost()`` when the database stayed
 unwritable for ``storage_timeout`` s. :class:`kite_rto.nodes.optimizer_node` turns these into messages.
 
@@ -22,12 +23,11 @@ Operator (the node's lifecycle, docs/interface.md *Pausing and overriding the op
 holds the setpoints in force and discards the experiment in progress (samples are still synchronized, nothing is
 measured); :meth:`OptimizerRun.manual_setpoints` (only while paused) checks setpoints against the box and the turn
 limit, stores them with the open iteration re-planned at them and publishes them; :meth:`OptimizerRun.resume`
-flies the open iteration's next experiment from the next sample on (the discarded one again, or the manual point's
-nominal experiment).
+flies the open iteration's next experiment from the next sample where a decision is due (:mod:`~.plan`; the
+discarded one again, or the manual point's nominal experiment).
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import replace
 
@@ -38,11 +38,12 @@ from ..flight.shape import setpoints_from_shape, shape_from_setpoints
 from ..gma import StoreError
 from ..kite.params import KiteParams
 from ..rto.run import RUN_KEY
-from .operator_log import MANUAL
+from .operator_log import MANUAL, setpoints_error
 from .run_description import plant_from_json
+from .plan import JOIN_LEAD_NS, MAX_LEAD, Mode, PlanSender
 from .run_persistence import RunPersistence
 from .run_status import degrees, shape_degrees
-from .sample_join import RejectLog, SampleJoin, reading_error, state_values
+from .sample_join import CrashCount, RejectLog, SampleJoin, reading_error, state_values
 
 __all__ = ["OptimizerRun"]
 
@@ -56,25 +57,25 @@ class OptimizerRun:
     ``clock``: wall time in s (monotonic), for the retry period and the timeout.
     """
 
-    def __init__(self, gma, session, store, box, *, n_iter: int, logger, send_setpoints, sync, status, finished,
+    def __init__(self, gma, session, store, box, *, n_iter: int, logger, send_setpoints, processed, status, finished,
                  storage_lost=lambda: None, storage_timeout: float = 60.0, run_meta: dict | None = None,
                  description=None, clock=time.monotonic):
         self.gma, self.session, self.store, self.box = gma, session, store, box
         self.n_iter = n_iter
         self.log = logger
-        self._send, self._sync, self._status, self._finished = send_setpoints, sync, status, finished
+        self._send, self._processed, self._status, self._finished = send_setpoints, processed, status, finished
+        self.plans = PlanSender()           # the plan the controller flies, and where a decision is due
         self._storage_lost = storage_lost
         self.description = description
         self.persist = RunPersistence(gma, store, logger, run_meta=run_meta, storage_timeout=storage_timeout,
                                       clock=clock)
         self.reject = RejectLog(logger)
-        self.join = SampleJoin()
+        self.join = SampleJoin(max_pending=2 * MAX_LEAD, lead_ns=JOIN_LEAD_NS)   # a backlog's topics out of step
         self._held = False                      # the session moved on while its records were unstored
         self._held_new = None                   # ... and asked for these setpoints (rad), applied once stored
         self.c_published = None             # setpoints of the last message sent (rad)
         self.updates = 0                    # setpoint messages sent by this process
-        self._crashes_seen = 0              # last crash count of the current plant
-        self._crash_offset = 0              # counts of plants that restarted (their count starts at 0 again)
+        self._crashes = CrashCount()
         self._started = False
         self.done = False
         self.phase = "waiting for the plant"
@@ -136,14 +137,11 @@ class OptimizerRun:
 
     def crashes(self, n: int) -> None:
         """The plant's crash count (a restarted plant counts from 0 again: not a crash, not un-crashed)."""
-        if n < self._crashes_seen:
-            self._crash_offset += self._crashes_seen
-        self._crashes_seen = n
-        self.join.crashes = self._crash_offset + n
+        self.join.crashes = self._crashes.update(n)
 
     def _part(self, stamp: int, part: str, value) -> None:
         if part == "state" and stamp == self.join.last:
-            self._sync(stamp)        # the plant re-published a processed sample (its answer is late): sync it again
+            self._processed(stamp, self.plans.plan)   # re-published (its answer is late): report it again
             return
         m = self.join.add(stamp, part, value)
         if self.join.discarded:
@@ -158,10 +156,22 @@ class OptimizerRun:
             self.log.warning(f"sim time jumped back to {m.t:.2f} s: plant restarted, the current "
                              "experiment starts again")
             self._started = False
+            self.plans.restart()
         self.on_sample(m)
-        self._sync(m.stamp)
 
     def on_sample(self, m) -> None:
+        """One joined sample: measured and decided on where a decision is due, then reported."""
+        due = self.plans.due(m.t, m.phi, m.crashes)
+        self._fly(m, due)
+        ev = self.session.evaluator
+        started = self.active and not self.done and ev.active and ev.t_start == m.t
+        mode = Mode.FREE if self.done else Mode.EXPERIMENT if started and not self._held else Mode.EACH
+        end = (ev.n_laps, self.session.spec.settle_time, self.session.spec.settle_laps, ev.max_duration)
+        self._processed(m.stamp, self.plans.after(m.t, due or started, self.c_published, self.updates, mode,
+                                                  end if mode is Mode.EXPERIMENT else ()))
+
+    def _fly(self, m, due: bool) -> None:
+        """The run's part of a sample: nothing starts or ends where no decision is ``due``."""
         if self.done:
             return
         if not self.active:                 # paused: the held setpoints fly, nothing is measured
@@ -178,6 +188,8 @@ class OptimizerRun:
             self._advance(self._held_new, m.t, restart=True)
             return
         if not self._started:
+            if not due:
+                return                              # resumed: the next experiment starts where a decision is due
             self._started = True
             if self.session.request is None:
                 self.setpoints(self.session.start(m.t))
@@ -283,20 +295,7 @@ class OptimizerRun:
             return f"the run has ended ({self.phase})"
         if self.persist.failing or self._held:
             return f"the database cannot be written ({self.persist.error})"
-        try:
-            c = np.asarray(c, dtype=float)
-            if c.shape != (3,):
-                raise SetpointError(f"setpoints = {c.tolist()}: expected 3 values (theta_0, A_phi, A_theta) rad")
-            validate_setpoints(c, self.box, KiteParams())
-        except (SetpointError, ValueError, TypeError) as err:
-            return str(err)
-        x, lb, ub = shape_from_setpoints(c), self.gma.problem.c_lb, self.gma.problem.c_ub
-        for name, v, lo, hi, deg in zip(("theta_0", "A_phi", "aspect"), x, lb, ub, (True, True, False)):
-            if not lo <= v <= hi:
-                f = (lambda a: f"{math.degrees(a):.4g} deg") if deg else (lambda a: f"{a:.4g}")
-                return (f"setpoints {degrees(c)}: shape coordinate {name} = {f(v)}: outside the optimizer's box "
-                        f"[{f(lo)}, {f(hi)}]")
-        return ""
+        return setpoints_error(c, self.box, self.gma.problem.c_lb, self.gma.problem.c_ub)
 
     # ------------------------------------------------------------------ storage
     def _store(self) -> bool:

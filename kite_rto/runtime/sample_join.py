@@ -21,7 +21,7 @@ import time
 from types import SimpleNamespace
 from typing import NamedTuple
 
-__all__ = ["SampleJoin", "Timeline", "Place", "Placement", "RejectLog", "state_values", "reading_error",
+__all__ = ["SampleJoin", "CrashCount", "Timeline", "Place", "Placement", "RejectLog", "state_values", "reading_error",
            "MAX_STAMP_GAP_NS", "ANGLE_MAX", "PSI_MAX", "RATE_MAX", "TENSION_MAX", "POSITION_MAX", "WIND_MAX"]
 
 PARTS = ("state", "tension", "position", "wind")
@@ -159,6 +159,24 @@ class Timeline:
         return Placement(Place.CANDIDATE, dropped=cand)
 
 
+class CrashCount:
+    """The plant's crash count (/kite/crashes) over plant restarts: a restarted plant counts from 0 again, which is
+    neither a crash nor one undone. :attr:`total` is what a sample's ``crashes`` reads."""
+
+    def __init__(self):
+        self.total = 0
+        self._seen = 0                    # the last count of the current plant
+        self._offset = 0                  # counts of plants that restarted
+
+    def update(self, n: int) -> int:
+        """A count ``n`` published by the plant; returns :attr:`total`."""
+        if n < self._seen:
+            self._offset += self._seen
+        self._seen = n
+        self.total = self._offset + n
+        return self.total
+
+
 class SampleJoin:
     """Collects parts keyed by stamp (ns); :meth:`add` returns the completed measurement or None.
 
@@ -167,16 +185,18 @@ class SampleJoin:
 
     The measurement has ``jumped_back = True`` when the timeline restarted before the previous sample (the plant
     restarted; the measurement is the second sample of the new timeline, the first one was the candidate).
-    Parts and complete samples that can no longer be used and lie more than ``max_gap_ns`` from the timeline are
-    appended to :attr:`discarded` as ``(stamp, parts)`` (stale or future junk; the caller reports and clears it);
-    parts of a sample that lost one message are dropped silently.
+    Parts and complete samples that can no longer be used and lie more than ``max_gap_ns`` behind the timeline or
+    ``lead_ns`` ahead of it (default ``max_gap_ns``; a reader that takes a backlog of several topics may see one
+    topic that far ahead of another) are appended to :attr:`discarded` as ``(stamp, parts)`` (stale or future junk;
+    the caller reports and clears it); parts of a sample that lost one message are dropped silently.
     """
 
-    def __init__(self, max_pending: int = 50, max_gap_ns: int = MAX_STAMP_GAP_NS):
+    def __init__(self, max_pending: int = 50, max_gap_ns: int = MAX_STAMP_GAP_NS, lead_ns: int | None = None):
         self._pending: dict[int, dict] = {}
         self.timeline = Timeline(max_gap_ns)
         self.max_pending = max_pending
         self.max_gap_ns = max_gap_ns
+        self.lead_ns = max_gap_ns if lead_ns is None else lead_ns
         self.crashes = 0
         self.discarded: list[tuple[int, tuple]] = []
 
@@ -211,13 +231,13 @@ class SampleJoin:
             return None
         jumped_back = place is Place.RESTART
         if pending:
-            gap = self.max_gap_ns
+            gap, lead = self.max_gap_ns, self.lead_ns
             for s in list(pending):
                 if jumped_back:                   # the old timeline: gone with the old plant
                     del pending[s]
-                elif s < stamp or s > stamp + gap:
+                elif s < stamp or s > stamp + lead:
                     parts = tuple(pending.pop(s))
-                    if s < stamp - gap or s > stamp + gap:
+                    if s < stamp - gap or s > stamp + lead:
                         self.discarded.append((s, parts))
         self.timeline.last = stamp
         state, tension, position, wind = (entry[p] for p in PARTS)

@@ -33,7 +33,7 @@ from ..flight.laps import LapDetector
 from ..flight.path import Setpoints, SetpointError
 from ..kite.model import shared_model
 from .optimizer_sync import SYNC_ABSENT, SYNC_NAMES, OptimizerSync, keep
-from .sample_join import Place, RejectLog, Timeline, reading_error, state_values
+from .sample_join import CrashCount, Place, RejectLog, Timeline, reading_error, state_values
 from .setpoint_inbox import SETPOINTS_GRACE, SETPOINTS_WAIT, SetpointInbox, StartupWait, fmt_setpoints
 from .sources import PLANT_QUIET, ServedPlant
 
@@ -84,6 +84,7 @@ class SteeringLoop:
         self.timeline = Timeline()
         self._wind, self._tension, self._altitude = params.w_ref, math.nan, math.nan
         self._last_delta = 0.0
+        self.crashes = CrashCount()       # the plant's crash count (the optimizer's plans end experiments on it)
         self._winds = {}                  # anemometer readings by stamp (ns), until their sample is answered
         self._pending = None              # (stamp, position, velocity) waiting for its wind reading
         self._jump = None                 # the same for a stale or future sample (plant restart or junk)
@@ -109,6 +110,10 @@ class SteeringLoop:
             if held is not None and held[0] == stamp:
                 self._process(held)
                 return
+
+    def crash_count(self, n: int) -> None:
+        """The plant's crash count (/kite/crashes)."""
+        self.crashes.update(n)
 
     def tension_reading(self, stamp: int, v: float) -> None:
         """A line tension (N), for the lap statistics."""
@@ -198,11 +203,11 @@ class SteeringLoop:
             self._drop_winds(stamp)
         m = _measurement(stamp, pos, vel, self._wind)
         if self.sync:
-            entry = self.optimizer_sync.entry(stamp)
-            if entry is not None:
-                self._apply_sync(entry)
-            elif self.optimizer_sync.hold(stamp, m, pos):
-                return                              # until its /rto/sync (sync_message) or the watchdog
+            wait, plan = self.optimizer_sync.decide(stamp, m.t, pos[1], self.crashes.total)
+            if plan is not None:
+                self._apply_plan(plan)
+            elif wait and self.optimizer_sync.hold(stamp, m, pos):
+                return                              # until the optimizer's /rto/sync (sync_message) or the watchdog
         self._steer(stamp, m, pos)
 
     def _steer(self, stamp: int, m, pos) -> None:
@@ -210,6 +215,8 @@ class SteeringLoop:
         delta = self.controller.command(m)
         self.timeline.last, self._last_delta = stamp, delta
         self._answer(stamp, delta)
+        if self.sync:
+            self.optimizer_sync.answered(stamp)
         self.inbox.flown(stamp)
         if self._path_due:
             self.publish_path_if_due()
@@ -237,6 +244,7 @@ class SteeringLoop:
             if back:
                 self.controller = self._restart[0]
                 self.laps.reset()
+                self.optimizer_sync.restart()
             self._restart = self._pending = None
             return True
         if place is Place.REPEATED:                     # the candidate re-published: the same answer
@@ -264,13 +272,18 @@ class SteeringLoop:
 
     # ---------------------------------------------------------------------- sync
     def sync_message(self, stamp: int, names, values) -> None:
-        """The optimizer has processed the sample ``stamp``: ``values`` are :data:`SYNC_NAMES`."""
-        entry = self.optimizer_sync.parse(names, values)
-        if entry is None or not self._stamp_near("sync", stamp):
+        """The optimizer has processed the sample ``stamp``: ``values`` are :data:`SYNC_NAMES` (its plan from it)."""
+        plan = self.optimizer_sync.parse(names, values)
+        if plan is None:
             return
-        held = self.optimizer_sync.arrived(stamp, entry, self.timeline.last)
+        if not self.optimizer_sync.plausible(stamp, self.timeline):
+            self.reject("sync stamp", f"rejected sync message stamped {stamp * 1e-9:.3f} s at sim time "
+                                      f"{self.timeline.last * 1e-9:.3f} s: stale or future")
+            return
+        held, apply = self.optimizer_sync.arrived(stamp, plan, self.timeline.last)
+        if apply is not None:
+            self._apply_plan(apply)
         if held is not None:
-            self._apply_sync(entry)
             self._steer(*held[:3])
 
     def watchdog(self) -> None:
@@ -279,9 +292,9 @@ class SteeringLoop:
         if held is not None:
             self._answer_unsynced(held)
 
-    def _apply_sync(self, entry) -> None:
-        c, updates = entry
-        if self.optimizer_sync.changes(c, updates, self.controller.setpoints.as_array().tolist()):
+    def _apply_plan(self, plan) -> None:
+        c = list(plan.c)
+        if self.optimizer_sync.changes(c, plan.updates, self.controller.setpoints.as_array().tolist()):
             self._apply_setpoints(c)
 
     def _answer_unsynced(self, held) -> None:

@@ -24,6 +24,8 @@ from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints
 from kite_rto.flight.shape import setpoints_from_shape
 from kite_rto.kite.plant import PlantConfig
 from kite_rto.gma import HistoryStore
+from kite_rto.runtime.optimizer_sync import SYNC_NAMES
+from kite_rto.runtime.plan import Plan
 from kite_rto.nodes.interface import LATCHED, MEASUREMENTS, RELIABLE_10, ns_to_stamp, stamp_to_ns
 
 from faultgraph import QUIET, SHORT, Watch, node, steering_recorder, stop_all
@@ -249,16 +251,17 @@ def _bad_controller_inputs():
 
 
 def _bad_sync_messages():
-    """Bad /rto/sync messages (the optimizer's per-sample message to a synchronized controller)."""
-    def sync(values, names=("theta_0", "A_phi", "A_theta", "updates"), dt=0):
+    """Bad /rto/sync messages (the optimizer's plans to a synchronized controller)."""
+    def sync(values, names=tuple(SYNC_NAMES), dt=0):
         def build(now, ok):
             m = JointState(name=list(names), position=[float(v) for v in values])
             m.header.stamp = ns_to_stamp(max(0, now + dt))
             return m
         return build
-    good, s5 = [0.6, 0.8, 0.12, 1.0], 30_000_000_000
-    return [("NaN", sync([NAN, 0.8, 0.12, 1.0])), ("Inf updates", sync([0.6, 0.8, 0.12, INF])),
-            ("3 values", sync([0.6, 0.8, 0.12])), ("wrong names", sync(good, names=("a", "b", "c", "d"))),
+    good, s5 = Plan((0.6, 0.8, 0.12), 1, 1).values(), 30_000_000_000
+    return [("NaN", sync([NAN, *good[1:]])), ("Inf updates", sync([*good[:3], INF, *good[4:]])),
+            ("3 values", sync(good[:3])), ("wrong names", sync(good, names=("a",) * len(good))),
+            ("mode 7", sync([*good[:5], 7.0, *good[6:]])),
             ("stamp 30 s behind", sync(good, dt=-s5)), ("stamp 30 s ahead", sync(good, dt=s5))]
 
 

@@ -2,7 +2,6 @@
 the operator event log and GMA's operator point."""
 import math
 import sqlite3
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -11,7 +10,7 @@ from kite_rto.gma import HistoryStore
 from kite_rto.rto.builder import make_gma
 from kite_rto.runtime.operator_log import MANUAL, TRANSITION, transition_event, was_paused
 
-from storage_flight import DT, SETTINGS, TICK, Flight
+from storage_flight import DT, SETTINGS, TICK, Flight, sample
 
 MANUAL_C = np.radians([33.0, 50.0, 7.5])       # inside the box and trackable (theta_0, A_phi, A_theta)
 
@@ -22,7 +21,7 @@ def step(f: Flight, n: int) -> None:
         if f.run.done:
             return
         f.clock += 0.1
-        f.run.on_sample(SimpleNamespace(t=f.t, crashes=0))
+        f.run.on_sample(sample(f.t))
         if i % TICK == 0:
             f.run.tick()
         f.t += DT

@@ -2,7 +2,6 @@
 configuration when the plant publishes it (a failed write keeps it and does not hold the run), bad configurations
 rejected; the plant's configuration as JSON and back; a resumed run's stored description."""
 from dataclasses import replace
-from types import SimpleNamespace
 
 import pytest
 
@@ -14,7 +13,7 @@ from kite_rto.rto.settings import KiteRTOSettings
 from kite_rto.runtime.run_description import plant_from_json, plant_json, stored_description
 from kite_rto.runtime.store_fault import DiskFull
 
-from storage_flight import DT, TICK, Flight, compare
+from storage_flight import DT, TICK, Flight, compare, sample
 
 PLANT = PlantConfig(params=replace(PLANT_PARAMS, w_ref=9.0))
 SETTINGS = KiteRTOSettings(experiment=ExperimentSpec(h_min=115.0))
@@ -31,7 +30,7 @@ def fly(f: Flight, config_at: int | None = None, text: str = "") -> list:
         if n == config_at:
             got.append(f.run.plant_config(text))
         f.clock += 0.1
-        f.run.on_sample(SimpleNamespace(t=f.t, crashes=0))
+        f.run.on_sample(sample(f.t))
         if n % TICK == 0:
             f.run.tick()
         f.t += DT

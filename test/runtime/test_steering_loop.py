@@ -8,6 +8,7 @@ import pytest
 
 from kite_rto.flight.controller import ControllerSettings, PathController
 from kite_rto.flight.path import DEFAULT_SETPOINTS, Setpoints
+from kite_rto.runtime.plan import Mode, Plan
 from kite_rto.runtime.sample_join import Place, Timeline
 from kite_rto.runtime.setpoint_inbox import SUMMARY_PERIOD
 from kite_rto.runtime.sources import SOURCE_QUIET, Publisher, SourceWatch, node_name, parse_source
@@ -176,17 +177,24 @@ def test_lost_samples_move_the_timeline_forward_when_continued():
     assert [s for s, _ in rig.answers] == [0, far + DT_NS]
 
 
+def plan(c, updates, number, mode=Mode.EACH, max_duration=0.0):
+    """A /rto/sync message's values: the plan ``number`` with setpoints ``c`` (an experiment plan ends after
+    ``max_duration`` s, flying no lap in these 40 samples)."""
+    end = (1, 0.0, 0, max_duration) if mode is Mode.EXPERIMENT else ()
+    return Plan(tuple(c), updates, number, mode, *end).values()
+
+
 def test_sync_applies_the_optimizer_setpoints_at_the_stamped_sample():
     rig = Rig(sync=True)
     rig.loop.setpoints_message(["theta_0", "A_phi", "A_theta"], DEFAULT_SETPOINTS.as_array().tolist())
-    rig.loop.sync_message(0, SYNC_NAMES, [*DEFAULT_SETPOINTS.as_array(), 1.0])   # sync before its sample
+    rig.loop.sync_message(0, SYNC_NAMES, plan(DEFAULT_SETPOINTS.as_array(), 1, 1))   # before its sample
     rig.sample(0)
     assert len(rig.answers) == 1
     rig.loop.setpoints_message(["theta_0", "A_phi", "A_theta"], NEW)    # not applied yet: synchronized
     assert rig.loop.controller.setpoints == DEFAULT_SETPOINTS
     rig.sample(1)
     assert len(rig.answers) == 1                                        # held for its sync message
-    rig.loop.sync_message(DT_NS, SYNC_NAMES, [*NEW, 2.0])
+    rig.loop.sync_message(DT_NS, SYNC_NAMES, plan(NEW, 2, 2))
     assert len(rig.answers) == 2 and rig.loop.controller.setpoints.as_array().tolist() == NEW
     ref = PathController(shared_model(), KiteParams(), DEFAULT_SETPOINTS, ControllerSettings())
     expected = [ref.command(_meas(0, rig.samples[0]))]
@@ -221,7 +229,7 @@ def test_before_any_sync_a_held_sample_waits_while_an_optimizer_is_in_the_graph(
     assert rig.log.count("no optimizer in the graph") == 1
     rig.sample(1)                                      # unsynchronized: answered at once
     assert len(rig.answers) == 2 and not rig.loop.synchronized()
-    rig.loop.sync_message(2 * DT_NS, SYNC_NAMES, [*NEW, 1.0])       # the optimizer is back
+    rig.loop.sync_message(2 * DT_NS, SYNC_NAMES, plan(NEW, 1, 1))   # the optimizer is back
     assert rig.loop.synchronized() and rig.log.count("/rto/sync is back: answering") == 1
     rig.sample(2)
     assert len(rig.answers) == 3
@@ -251,7 +259,7 @@ def test_after_the_first_sync_a_sample_waits_for_its_own_whatever_the_graph_show
     (a restarted optimizer picks it up): what the kite flies cannot depend on how fast the optimizer is."""
     rig = Rig(sync=True, optimizer=True)
     rig.sample(0)
-    rig.loop.sync_message(0, SYNC_NAMES, [*NEW, 1.0])
+    rig.loop.sync_message(0, SYNC_NAMES, plan(NEW, 1, 1))
     assert len(rig.answers) == 1
     rig.sample(1)
     rig.optimizer_alive = 0                            # the graph shows no optimizer (killed, or a discovery hiccup)
@@ -259,7 +267,7 @@ def test_after_the_first_sync_a_sample_waits_for_its_own_whatever_the_graph_show
         rig.now += 60.0
         rig.loop.watchdog()
     assert len(rig.answers) == 1 and rig.loop.synchronized() and rig.log.count("waiting") >= 1
-    rig.loop.sync_message(DT_NS, SYNC_NAMES, [*NEW, 1.0])          # the optimizer (restarted) processes it
+    rig.loop.sync_message(DT_NS, SYNC_NAMES, plan(NEW, 1, 1))      # the optimizer (restarted) processes it
     assert [s for s, _ in rig.answers] == [0, DT_NS]
 
 

@@ -18,6 +18,7 @@ from kite_rto.gma import HistoryStore
 from kite_rto.kite.params import KiteParams
 from kite_rto.rto.builder import make_gma
 from kite_rto.rto.experiment import ExperimentOutcome, ExperimentSpec
+from kite_rto.rto.experiment_end import ExperimentEnd
 from kite_rto.rto.run import RUN_KEY
 from kite_rto.runtime.optimizer_run import OptimizerRun
 from kite_rto.runtime.run_db import SETTINGS_KEY, open_run_database
@@ -36,6 +37,11 @@ def plant(c) -> tuple[float, float]:
     t0, a_phi, a_theta = c
     tension = 8.0 - 20.0 * (t0 - 0.55) ** 2 - 6.0 * (a_phi - 0.9) ** 2 - 80.0 * (a_theta - 0.15) ** 2
     return -tension, -5.0 + 10.0 * (0.6 - t0)
+
+
+def sample(t: float) -> SimpleNamespace:
+    """A joined sample at ``t`` s as :meth:`OptimizerRun.on_sample` takes it (flying no lap, no crash)."""
+    return SimpleNamespace(t=t, phi=0.0, crashes=0, stamp=round(t * 1e9))
 
 
 class Log:
@@ -58,7 +64,10 @@ class Log:
 
 
 class Evaluator:
-    """Stands in for ExperimentEvaluator: an experiment ends DURATION s after its start, measured by ``plant``."""
+    """Stands in for ExperimentEvaluator: an experiment ends DURATION s after its start (the samples fly no lap, so
+    the shared end rule times it out there, as the optimizer's plans expect), measured by ``plant``."""
+
+    n_laps, max_duration = 1, DURATION
 
     def __init__(self, flight):
         self.flight = flight
@@ -66,12 +75,14 @@ class Evaluator:
         self.t_start = math.nan
         self.active = False
         self.wind_estimate = math.nan
+        self.end = None
 
     def start(self, t, c=None, n_laps=None):
         self.c, self.t_start, self.active = np.array(c, dtype=float), float(t), True
+        self.end = ExperimentEnd(self.t_start, self.n_laps, 0.0, 0, self.max_duration)
 
     def update(self, m):
-        if not self.active or m.t - self.t_start < DURATION - 1e-9:
+        if not self.active or self.end.update(m.t, m.phi, m.crashes) is None:
             return None
         self.active = False
         self.flight.check_window(self.c, self.t_start)
@@ -100,7 +111,7 @@ class Flight:
         self.storage_lost = self.finished = False
         self.log = Log()
         self.run = OptimizerRun(self.gma, session, self.store, SETTINGS.box.setpoint_box(), n_iter=n_iter,
-                                logger=self.log, send_setpoints=self.send, sync=lambda stamp: None,
+                                logger=self.log, send_setpoints=self.send, processed=lambda stamp, plan: None,
                                 status=lambda: None, finished=self._finished, storage_lost=self._lost,
                                 storage_timeout=timeout, run_meta=run_meta, description=description,
                                 clock=lambda: self.clock)
@@ -135,7 +146,7 @@ class Flight:
             if self.run.done or n == kill_after:
                 break
             self.clock += WALL
-            self.run.on_sample(SimpleNamespace(t=self.t, crashes=0))
+            self.run.on_sample(sample(self.t))
             if n % TICK == 0:
                 self.run.tick()
             self.t += DT
