@@ -30,7 +30,7 @@ from kite_rto.kite.plant import PlantConfig
 REFERENCE = Path(__file__).resolve().parent / "controller_reference.npz"
 FLIGHT_SAMPLES = 1000          # 20 s at dt = 0.02 s
 SCRIPTED_SAMPLES = 300
-PATH_POINTS = 200
+PATH_POINTS = 4000
 
 
 def _status_row(ctl: PathController, delta: float) -> list:
@@ -76,7 +76,8 @@ def _scripted() -> np.ndarray:
 
 
 def _path() -> np.ndarray:
-    """Closest points (global, windowed, tracked from a nearby or a far s) and turn radii of two paths."""
+    """Closest points (global, windowed, tracked from a nearby and from a far s), curvature, course, speed and
+    tangent at random positions near two paths, and their turn radii."""
     rng = np.random.default_rng(5)
     rows = []
     for c in (DEFAULT_SETPOINTS, Setpoints.from_degrees(33.0, 50.0, -7.5)):
@@ -86,9 +87,10 @@ def _path() -> np.ndarray:
             s = rng.uniform(0.0, 2 * math.pi)
             theta, phi = path.point(s)
             theta, phi = theta + rng.normal(0.0, 0.03), phi + rng.normal(0.0, 0.03)
-            s_prev = (s + rng.choice([0.05, -0.3, 0.7, 2.0])) % (2 * math.pi)
-            for cp in (path.closest_point(theta, phi), path.closest_point(theta, phi, s_guess=s_prev),
-                       path.track(theta, phi, s_prev)):
+            near = (s + rng.normal(0.0, 0.1)) % (2 * math.pi)
+            far = (s + rng.choice([0.05, -0.3, 0.7, 2.0])) % (2 * math.pi)
+            for cp in (path.closest_point(theta, phi), path.closest_point(theta, phi, s_guess=far),
+                       path.track(theta, phi, near), path.track(theta, phi, far)):
                 rows.append([cp.s, cp.theta, cp.phi, cp.cross_track, cp.course])
             rows.append([path.curvature(s), path.course(s), path.speed(s), *path.tangent(s)])
     return np.array(rows)
