@@ -5,9 +5,9 @@ Flies the pure closed loop (``make_closed_loop``: default plant, default setpoin
 times, replays the measurements into a fresh controller of this tree and into one of ``--baseline`` (the package
 at that git revision, exported to a temporary folder and imported as ``kite_rto_baseline``), alternating which goes
 first, and times the replay: the controller's commands depend only on the measurements, so a replay is exactly the
-closed loop's work, and each replay must give the recorded commands bit for bit. The plant's ``step`` is timed the
-same way on the recorded commands. Reports medians, in µs per call, as wall-clock time (``perf_counter``) and CPU
-time of this process (``process_time``: less sensitive to other processes on the cores).
+closed loop's work, and each replay must give the recorded commands bit for bit. Each variant's plant ``step`` is
+timed the same way, on the recorded commands. Reports medians, in µs per call, as wall-clock time
+(``perf_counter``) and CPU time of this process (``process_time``: less sensitive to other processes on the cores).
 
 ``--profile`` also prints the cProfile of one replay of this tree's controller (top 15 by own time).
 
@@ -65,7 +65,7 @@ def load_baseline(rev: str, into: str):
 
 
 def time_commands(make, ms: list, cmds: list) -> tuple[float, float]:
-    """Wall and CPU µs per ``command`` of a fresh controller from ``make(seed=...)`` replaying ``ms``; checks that
+    """Wall and CPU µs per ``command`` of a fresh controller from ``make()`` replaying ``ms``; checks that
     it answers ``cmds`` bit for bit."""
     command = make()[1].command
     out = []
@@ -118,25 +118,25 @@ def main(argv=None) -> list[tuple]:
             variants[f"baseline {args.baseline}"] = lambda: base.make_closed_loop(seed=args.seed)
         names = list(variants)
         runs = {n: [] for n in names}
-        plant_runs = []
+        plant_runs = {n: [] for n in names}
         for name in names:                                   # warm-up
             time_commands(variants[name], ms[:500], cmds[:500])
         for r in range(args.repeats):
             for name in (names if r % 2 == 0 else names[::-1]):
                 runs[name].append(time_commands(variants[name], ms, cmds))
-            plant_runs.append(time_plant(variants["this tree"], cmds))
+                plant_runs[name].append(time_plant(variants[name], cmds))
     load1 = os.getloadavg()[0]
 
-    med = {n: (statistics.median(w for w, _ in runs[n]), statistics.median(c for _, c in runs[n])) for n in names}
     rows = []
-    for n in names:
-        rows.append((f"PathController.command ({n}), wall, µs/call", f"{med[n][0]:.1f}", "", ""))
-        rows.append((f"PathController.command ({n}), CPU, µs/call", f"{med[n][1]:.1f}", "", ""))
-    if len(names) == 2:
-        rows.append(("speed-up of this tree, CPU", f"{med[names[1]][1] / med[names[0]][1]:.2f}x", "", ""))
+    for what, unit, timings in (("PathController.command", "call", runs), ("KitePlant.step", "step", plant_runs)):
+        med = {n: (statistics.median(w for w, _ in timings[n]), statistics.median(c for _, c in timings[n]))
+               for n in names}
+        for n in names:
+            rows.append((f"{what} ({n}), wall, µs/{unit}", f"{med[n][0]:.1f}", "", ""))
+            rows.append((f"{what} ({n}), CPU, µs/{unit}", f"{med[n][1]:.1f}", "", ""))
+        if len(names) == 2:
+            rows.append((f"{what}: speed-up of this tree, CPU", f"{med[names[1]][1] / med[names[0]][1]:.2f}x", "", ""))
     rows += [
-        ("KitePlant.step (this tree), wall, µs/step", f"{statistics.median(w for w, _ in plant_runs):.1f}", "", ""),
-        ("KitePlant.step (this tree), CPU, µs/step", f"{statistics.median(c for _, c in plant_runs):.1f}", "", ""),
         ("commands bit-identical to the closed loop's" + (" and the baseline's" if len(names) == 2 else ""),
          "yes", "yes", "yes"),
         ("load average (1 min) before/after, cores", f"{load0:.1f}/{load1:.1f}, {os.cpu_count()}", "", ""),
