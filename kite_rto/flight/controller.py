@@ -3,7 +3,7 @@
 Structure (Erhard & Strauch 2013 / Fagiano et al. 2014 style), all from measured quantities only:
 
 1. **Dead-time compensation**: the state measured now is propagated over the steering dead time with the
-   nominal model (:meth:`KiteModel.step_py`) and the commands already sent but not yet applied (the controller
+   nominal model (``KiteModel.state_step_py``) and the commands already sent but not yet applied (the controller
    keeps its own copy of the actuator's delay line and rate limit). The command computed now acts on that
    predicted state.
 2. **Guidance**: closest point on the path (warm-started path parameter), desired course
@@ -112,7 +112,7 @@ class PathController:
     """Steers the kite along the figure-eight of the current setpoints.
 
     Args:
-        model: the shared :class:`KiteModel` (its ``step_py`` is used for the dead-time prediction).
+        model: the shared :class:`KiteModel` (its ``state_step_py`` is used for the dead-time prediction).
         model_params: the controller's (nominal) :class:`KiteParams`; never the plant's.
         setpoints: initial :class:`Setpoints` (validated; raises :class:`SetpointError`).
         settings: :class:`ControllerSettings`.
@@ -208,8 +208,9 @@ class PathController:
 
         # 1. dead-time prediction with the commands in flight
         x = [theta, phi, psi]
+        step, dt = self.model.state_step_py, st.dt
         for applied in self._actuator.pending():
-            x = self.model.step_py(x, applied, p, st.dt)[0]
+            x = step(x, applied, p, dt)[0]
         th_p, ph_p, psi_p = x
 
         # 2. guidance at the predicted state

@@ -54,6 +54,8 @@ class FigureEightPath:
     def __init__(self, setpoints: Setpoints):
         self.setpoints = setpoints
         self._t0, self._ap, self._at = setpoints.theta_0, setpoints.A_phi, setpoints.A_theta
+        # factors of the derivatives, computed once: the same values as 2 * A_theta, -4 * A_theta, -A_phi inline
+        self._at2, self._atm4, self._apm = 2 * self._at, -4 * self._at, -self._ap
 
     # --- geometry ----------------------------------------------------------------------------
     def point(self, s):
@@ -61,14 +63,6 @@ class FigureEightPath:
         if isinstance(s, np.ndarray):
             return self._t0 + self._at * np.sin(2 * s), self._ap * np.sin(s)
         return self._t0 + self._at * math.sin(2 * s), self._ap * math.sin(s)
-
-    def _local(self, s: float):
-        """north/east components of dP/ds and d2P/ds2 (second derivative of the components)."""
-        th = self._t0 + self._at * math.sin(2 * s)
-        dth, dph = 2 * self._at * math.cos(2 * s), self._ap * math.cos(s)
-        ddth, ddph = -4 * self._at * math.sin(2 * s), -self._ap * math.sin(s)
-        st, ct = math.sin(th), math.cos(th)
-        return th, st, ct, dth, dph, ddth, ddph, dth, st * dph, ddth, ct * dth * dph + st * ddph
 
     def speed(self, s: float) -> float:
         """Arc-length rate ``|dP/ds|`` (rad of arc per unit of s)."""
@@ -88,8 +82,18 @@ class FigureEightPath:
         return math.atan2(math.sin(th) * self._ap * math.cos(s), 2 * self._at * math.cos(2 * s))
 
     def curvature(self, s: float) -> float:
-        """Geodesic curvature on the sphere, 1/rad (signed, positive towards increasing course)."""
-        th, st, ct, dth, dph, ddth, ddph, n, e, dn, de = self._local(s)
+        """Geodesic curvature on the sphere, 1/rad (signed, positive towards increasing course).
+
+        From the north/east components ``(n, e) = (theta', sin(theta) phi')`` of dP/ds and their s-derivatives
+        ``(dn, de)`` (primes: d/ds): ``(d chi/ds + cos(theta) phi') / |(n, e)|``, ``d chi/ds = (n de - e dn) / |.|^2``.
+        """
+        s2 = 2 * s
+        sin2 = math.sin(s2)
+        th = self._t0 + self._at * sin2
+        n, dph = self._at2 * math.cos(s2), self._ap * math.cos(s)
+        st, ct = math.sin(th), math.cos(th)
+        e, dn = st * dph, self._atm4 * sin2
+        de = ct * n * dph + st * (self._apm * math.sin(s))
         v2 = n * n + e * e
         dchi = (n * de - e * dn) / v2
         return (dchi + ct * dph) / math.sqrt(v2)
@@ -131,25 +135,33 @@ class FigureEightPath:
         return r / worst
 
     # --- closest point -------------------------------------------------------------------------
-    def _residual(self, s: float, theta: float, phi: float):
-        """Distance terms in the local metric at s: (d theta, sin(theta) d phi) and their s-derivatives."""
-        th, st, ct, dth, dph, ddth, ddph, *_ = self._local(s)
-        ph = self._ap * math.sin(s)
-        dn, de = theta - th, st * (phi - ph)
-        # derivative of (dn, de) with respect to s
-        ddn = -dth
-        dde = ct * dth * (phi - ph) - st * dph
-        return dn, de, ddn, dde, th, ph, st, ct, dth, dph, ddth, ddph
-
     def _refine(self, s: float, theta: float, phi: float, iters: int = 4) -> float:
-        """Gauss-Newton on ``|(dn, de)|^2`` from s, step limited to 0.3."""
+        """Gauss-Newton on ``|(dn, de)|^2`` from s, step limited to 0.3.
+
+        ``(dn, de) = (theta - theta_ref, sin(theta_ref) (phi - phi_ref))`` is the offset from the path point at s in
+        the local metric, ``(ddn, dde)`` its s-derivative. Written out with scalar math (no calls, no tuples):
+        this runs twice per controller sample.
+        """
+        t0, ap, at, at2 = self._t0, self._ap, self._at, self._at2
+        sin, cos = math.sin, math.cos
         for _ in range(iters):
-            dn, de, ddn, dde, *_ = self._residual(s, theta, phi)
+            s2 = 2 * s
+            th = t0 + at * sin(s2)
+            dth = at2 * cos(s2)
+            st = sin(th)
+            dphi = phi - ap * sin(s)
+            dn, de = theta - th, st * dphi
+            ddn = -dth
+            dde = cos(th) * dth * dphi - st * (ap * cos(s))
             g = dn * ddn + de * dde
             h = ddn * ddn + dde * dde
             if h <= 0.0:
                 break
-            step = max(-0.3, min(0.3, -g / h))
+            step = -g / h               # max(-0.3, min(0.3, step)), NaN included (-> 0.3), without the calls
+            if not step < 0.3:
+                step = 0.3
+            elif not step > -0.3:
+                step = -0.3
             s += step
             if abs(step) < 1e-10:
                 break
@@ -194,12 +206,29 @@ class FigureEightPath:
         return cp
 
     def _closest(self, s: float, theta: float, phi: float) -> ClosestPoint:
-        dn, de, _, _, th, ph, st, _, dth, dph, _, _ = self._residual(s, theta, phi)
-        n, e = dth, st * dph
+        """The :class:`ClosestPoint` of ``(theta, phi)`` (rad) for path parameter ``s``."""
+        s2 = 2 * s
+        th = self._t0 + self._at * math.sin(s2)
+        ph = self._ap * math.sin(s)
+        st = math.sin(th)
+        n, e = self._at2 * math.cos(s2), st * (self._ap * math.cos(s))      # tangent dP/ds (north, east)
+        dn, de = theta - th, st * (phi - ph)
         v = math.hypot(n, e)
         # normal to the left of north->east rotation: (-e, n)/v in (north, east)
         cross = (-dn * e + de * n) / v
-        return ClosestPoint(s, th, ph, cross, math.atan2(e, n))
+        return _closest_point(s, th, ph, cross, math.atan2(e, n))
+
+
+_new = object.__new__
+
+
+def _closest_point(s: float, theta: float, phi: float, cross_track: float, course: float) -> ClosestPoint:
+    """Build a :class:`ClosestPoint` (s; theta, phi, cross_track, course rad) without the frozen dataclass's
+    per-field ``object.__setattr__`` (about 2x faster; the controller builds two per sample). The result is an
+    ordinary ``ClosestPoint`` (same fields, ``==``, ``hash``, ``repr``)."""
+    cp = _new(ClosestPoint)
+    cp.__dict__.update(s=s, theta=theta, phi=phi, cross_track=cross_track, course=course)
+    return cp
 
 
 DEFAULT_TURN_MARGIN = 0.95

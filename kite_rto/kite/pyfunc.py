@@ -13,8 +13,11 @@ __all__ = ["to_python"]
 
 _BINARY = {
     ca.OP_ADD: "{0} + {1}", ca.OP_SUB: "{0} - {1}", ca.OP_MUL: "{0} * {1}", ca.OP_DIV: "{0} / {1}",
-    ca.OP_POW: "{0} ** {1}", ca.OP_CONSTPOW: "{0} ** {1}", ca.OP_FMAX: "max({0}, {1})",
-    ca.OP_FMIN: "min({0}, {1})", ca.OP_ATAN2: "atan2({0}, {1})", ca.OP_COPYSIGN: "copysign({0}, {1})",
+    ca.OP_POW: "{0} ** {1}", ca.OP_CONSTPOW: "{0} ** {1}",
+    # max(a, b) and min(a, b) exactly (NaN and signed zeros alike: b replaces a only if b > a, resp. b < a),
+    # without the builtin's call: 20 ns instead of 90 (the model's wind has one per evaluation)
+    ca.OP_FMAX: "({1} if {1} > {0} else {0})", ca.OP_FMIN: "({1} if {1} < {0} else {0})",
+    ca.OP_ATAN2: "atan2({0}, {1})", ca.OP_COPYSIGN: "copysign({0}, {1})",
     ca.OP_LT: "float({0} < {1})", ca.OP_LE: "float({0} <= {1})", ca.OP_EQ: "float({0} == {1})",
     ca.OP_NE: "float({0} != {1})", ca.OP_AND: "float(bool({0}) and bool({1}))",
     ca.OP_OR: "float(bool({0}) or bool({1}))", ca.OP_HYPOT: "hypot({0}, {1})",

@@ -83,6 +83,16 @@ def test_python_translation_matches_casadi():
         np.testing.assert_allclose(out[6:], np.asarray(MODEL.f_rhs(xn, d, pv)).ravel(), rtol=1e-12, atol=1e-14)
 
 
+def test_state_step_is_the_first_result_of_step_py_bit_for_bit():
+    """The controller's prediction (state_step_py) flies exactly the plant's RK4 step, wind near the ground too."""
+    rng = np.random.default_rng(4)
+    for k in range(500):
+        x = [rng.uniform(0.05, 1.5), rng.uniform(-1.2, 1.2), rng.uniform(-3.5, 3.5)]
+        pv = KiteParams(w_ref=rng.uniform(0.5, 20.0), c_E=rng.uniform(0.0, 1.0)).as_vector()
+        d, dt = rng.uniform(-1, 1), (0.02, 0.0, rng.uniform(0.0, 0.2))[k % 3]
+        assert MODEL.state_step_py(x, d, pv, dt)[0] == MODEL.step_py(x, d, pv, dt)[0]
+
+
 def test_rk4_converges_with_order_four():
     x0, d, pv, T = [0.4, 0.3, 0.8], 0.3, P.as_vector(), 2.0
 
