@@ -17,12 +17,12 @@ flies the same sequence, while the optimizer works beside the plant and the cont
 A ROS 2 lifecycle (managed) node (docs/interface.md *Pausing and overriding the optimizer*): ``configure`` opens the
 database and builds the NLPs and directions on a worker thread (services answer meanwhile), ``activate`` starts or
 resumes experiments, ``deactivate`` holds the setpoints in force (the kite keeps flying them; from the end of the
-plan in force on, ``/rto/sync`` answers every sample; the experiment in progress is flown again after ``activate``), ``cleanup`` and ``shutdown``
-close the database (``shutdown`` then ends the process, code 0). While inactive, ``/rto/manual_setpoints``
-(:data:`MANUAL_SETPOINTS`, same type as ``/rto/setpoints``) hands it setpoints to continue from. Every transition
-and manual setpoint is stored in the database's event log; a restarted optimizer whose last ``activate`` /
-``deactivate`` was a ``deactivate`` comes back inactive. With ``autostart`` (default) it configures and activates
-itself at start-up.
+plan in force on, ``/rto/sync`` answers every sample; the experiment in progress is flown again after ``activate``),
+``cleanup`` and ``shutdown`` close the database (``shutdown`` then ends the process, code 0). While inactive,
+``/rto/manual_setpoints`` (:data:`MANUAL_SETPOINTS`, same type as ``/rto/setpoints``) hands it setpoints to continue
+from. Every transition and manual setpoint is stored in the database's event log; a restarted optimizer whose last
+``activate`` / ``deactivate`` was a ``deactivate`` comes back inactive. With ``autostart`` (default) it configures
+and activates itself at start-up.
 
 Storage (docs/storage.md): a damaged database, one that holds a run while ``resume`` is false, or one made with other
 settings stops the node at start-up with exit code 2 (the file untouched); a database that stays unwritable for

@@ -55,9 +55,9 @@ class RunWire:
 
         def wind(msg: Vector3Stamped):
             run.reading(stamp_to_ns(msg.header.stamp), "wind", msg.vector.x)
-        sub = self._node.create_subscription        # deep: the run may fall MAX_LEAD samples behind the plant
-        self._subs = [sub(JointState, STATE, state, MEASUREMENTS), sub(WrenchStamped, TENSION, tension, MEASUREMENTS),
-                      sub(PointStamped, POSITION, position, MEASUREMENTS), sub(Vector3Stamped, WIND, wind, MEASUREMENTS),
+        sub, deep = self._node.create_subscription, MEASUREMENTS    # the run may fall MAX_LEAD samples behind
+        self._subs = [sub(JointState, STATE, state, deep), sub(WrenchStamped, TENSION, tension, deep),
+                      sub(PointStamped, POSITION, position, deep), sub(Vector3Stamped, WIND, wind, deep),
                       sub(UInt32, CRASHES, lambda msg: run.crashes(int(msg.data)), LATCHED),
                       sub(String, PLANT_CONFIG, plant_config, LATCHED_10)]
 

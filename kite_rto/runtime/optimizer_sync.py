@@ -123,12 +123,15 @@ class OptimizerSync:
     def plausible(self, stamp: int, timeline) -> bool:
         """A message stamped ``stamp`` (ns) can be about a sample of the ``timeline``
         (:class:`~.sample_join.Timeline`): not beyond its gap ahead of the last answered sample, nor behind the
-        oldest sample the optimizer has not reported yet (it may be :data:`~.plan.MAX_LEAD` samples behind)."""
+        oldest sample the optimizer has not reported yet (it may be :data:`~.plan.MAX_LEAD` samples behind). If
+        not, the message is rejected (False)."""
         last, gap = timeline.last, timeline.max_gap_ns
-        if last is None:
+        oldest = None if last is None else self._ahead[0][0] if self._ahead else last
+        if last is None or oldest - gap <= stamp <= last + gap:
             return True
-        oldest = self._ahead[0][0] if self._ahead else last
-        return oldest - gap <= stamp <= last + gap
+        self.reject("sync stamp", f"rejected sync message stamped {stamp * 1e-9:.3f} s at sim time "
+                                  f"{last * 1e-9:.3f} s: stale or future")
+        return False
 
     def arrived(self, stamp: int, plan: Plan, last: int | None):
         """The optimizer has processed the sample ``stamp`` (``plan`` in force from it; the loop's last answered

@@ -18,9 +18,10 @@ than the path can follow are warned about, :mod:`~.setpoint_rate`); at start-up
 the loop waits for them before it steers (:class:`~.setpoint_inbox.StartupWait`). The reference path is published
 after the answer, at most every :data:`PATH_PERIOD` s.
 
-Synchronization (``sync=True``): the loop owns an :class:`~.optimizer_sync.OptimizerSync`, which holds each sample
-for the optimizer's /rto/sync message and says when a held sample is to be answered; the loop applies the synced
-setpoints and answers.
+Synchronization (``sync=True``): the loop owns an :class:`~.optimizer_sync.OptimizerSync`, which follows the
+optimizer's plans (:mod:`~.plan`: it holds a sample only where a decision is due, or where the loop would run too
+far ahead of the optimizer) and says when a held sample is to be answered; the loop applies a new plan's setpoints
+and answers.
 """
 from __future__ import annotations
 
@@ -274,11 +275,7 @@ class SteeringLoop:
     def sync_message(self, stamp: int, names, values) -> None:
         """The optimizer has processed the sample ``stamp``: ``values`` are :data:`SYNC_NAMES` (its plan from it)."""
         plan = self.optimizer_sync.parse(names, values)
-        if plan is None:
-            return
-        if not self.optimizer_sync.plausible(stamp, self.timeline):
-            self.reject("sync stamp", f"rejected sync message stamped {stamp * 1e-9:.3f} s at sim time "
-                                      f"{self.timeline.last * 1e-9:.3f} s: stale or future")
+        if plan is None or not self.optimizer_sync.plausible(stamp, self.timeline):
             return
         held, apply = self.optimizer_sync.arrived(stamp, plan, self.timeline.last)
         if apply is not None:

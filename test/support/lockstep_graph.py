@@ -23,26 +23,9 @@ from kite_rto.runtime.optimizer_sync import SYNC_NAMES
 from kite_rto.runtime.run_db import open_run_database
 from kite_rto.runtime.steering_loop import SteeringLoop
 
+from storage_flight import Log
+
 STATE_NAMES = ["theta", "phi", "psi"]
-
-
-class Log:
-    """A logger that keeps (level, text) lines (throttling arguments ignored)."""
-
-    def __init__(self):
-        self.lines = []
-
-    def info(self, text, **_):
-        self.lines.append(("info", text))
-
-    def warning(self, text, **_):
-        self.lines.append(("warning", text))
-
-    def error(self, text, **_):
-        self.lines.append(("error", text))
-
-    def text(self, level=None) -> str:
-        return "\n".join(t for lv, t in self.lines if level in (None, lv))
 
 
 class LockstepGraph:

@@ -45,18 +45,18 @@ def sample(t: float) -> SimpleNamespace:
 
 
 class Log:
-    """A logger that keeps (level, text) lines."""
+    """A logger that keeps (level, text) lines (throttling arguments ignored)."""
 
     def __init__(self):
         self.lines = []
 
-    def info(self, text):
+    def info(self, text, **_):
         self.lines.append(("info", text))
 
-    def warning(self, text):
+    def warning(self, text, **_):
         self.lines.append(("warning", text))
 
-    def error(self, text):
+    def error(self, text, **_):
         self.lines.append(("error", text))
 
     def text(self, level=None) -> str:
