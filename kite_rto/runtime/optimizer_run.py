@@ -166,9 +166,9 @@ class OptimizerRun:
         ev = self.session.evaluator
         started = self.active and not self.done and ev.active and ev.t_start == m.t
         mode = Mode.FREE if self.done else Mode.EXPERIMENT if started and not self._held else Mode.EACH
-        end = (ev.n_laps, self.session.spec.settle_time, self.session.spec.settle_laps, ev.max_duration)
-        self._processed(m.stamp, self.plans.after(m.t, due or started, self.c_published, self.updates, mode,
-                                                  end if mode is Mode.EXPERIMENT else ()))
+        sp = self.session.spec
+        end = (ev.n_laps, sp.settle_time, sp.settle_laps, ev.max_duration) if mode is Mode.EXPERIMENT else ()
+        self._processed(m.stamp, self.plans.after(m.t, due or started, self.c_published, self.updates, mode, end))
 
     def _fly(self, m, due: bool) -> None:
         """The run's part of a sample: nothing starts or ends where no decision is ``due``."""
