@@ -1,5 +1,5 @@
 """The judge: setpoints re-flown on a plant's deterministic twin against its oracle (:func:`judge_point`,
-:func:`judge`, :func:`reaches`). The one place of the target: the campaign, the run report and the benchmarks judge
+:func:`judge`, :func:`reaches`), and a whole flight's yield (:func:`judge_flight`). The one place of the target: the campaign, the run report and the benchmarks judge
 with it.
 
 An iterate *reaches* the target when, re-flown on the deterministic plant (turbulence and noise off,
@@ -16,10 +16,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..kite.plant import PlantConfig
+from ..flight.shape import setpoints_from_shape
+from .flight_yield import FlightYield, flight_yield, segments_of_history
 from .oracle import plant_performance
 
 __all__ = ["REACH_FRACTION", "REACH_PERCENT", "ALTITUDE_TOLERANCE_M", "Judged", "Verdict", "altitude_floor",
-           "judge_point", "judge", "reaches"]
+           "judge_point", "judge", "reaches", "judge_flight"]
 
 REACH_FRACTION = 0.99
 """The target: this fraction of the oracle's mean tension."""
@@ -121,3 +123,13 @@ def judge(plant: PlantConfig, h_min: float, oracle_tension_kn: float, iterates, 
                    reach_time=float(times[k]) if k is not None else math.inf, held_from=held,
                    lowest_altitude=float(min(p.min_altitude for p in points)),
                    below_floor=sum(not p.above_floor for p in points))
+
+
+def judge_flight(plant: PlantConfig, h_min: float, oracle_tension_kn: float, history) -> FlightYield:
+    """The yield of a GMA run's whole flight (:mod:`~kite_rto.rto.flight_yield`): every experiment of ``history``
+    (requests in shape coordinates) judged on ``plant``'s deterministic twin in its (stationary) mean wind, over
+    the oracle's ``oracle_tension_kn`` (kN), with the time flown below the floor of ``h_min`` (m)."""
+    _check(plant, h_min, oracle_tension_kn)
+    return flight_yield(segments_of_history(history, setpoints_from_shape),
+                        judge=lambda c, t: plant_performance(plant, c), oracle=lambda t: oracle_tension_kn,
+                        floor=altitude_floor(h_min))

@@ -18,13 +18,15 @@ def _legend(ax, **kw) -> None:
         ax.legend(**kw)
 
 
-def report_figure(history, rows, oracle, out: Path, samples=None, laps=None, h_min: float | None = None) -> None:
+def report_figure(history, rows, oracle, out: Path, samples=None, laps=None, h_min: float | None = None,
+                  flight=None) -> None:
     """Save ``out/report.png``: flown paths and references per iterate, tension per lap against the oracle,
     setpoints per iteration and the judged (or measured) performance per iteration.
 
     ``rows`` are :func:`~kite_rto.tools.rto_report.judge_iterates` rows, ``oracle`` an ``OracleResult`` or None,
     ``samples`` = (t, theta, phi) arrays (s, rad) of the flight or None, ``laps`` dicts of the /kite/laps fields,
-    ``h_min`` the run's altitude floor (m; drawn when the rows are judged).
+    ``h_min`` the run's altitude floor (m; drawn when the rows are judged), ``flight`` the run's
+    :class:`~kite_rto.rto.flight_yield.FlightYield` or None (drawn as the judged tension of the setpoints flown).
     """
     # Not on import: choosing the Agg backend is a global change that only drawing a file should make.
     import matplotlib
@@ -62,9 +64,14 @@ def report_figure(history, rows, oracle, out: Path, samples=None, laps=None, h_m
                 ms=4, label="normalized to w_ref = 8 m/s")
     if oracle is not None:
         ax.axhline(oracle.tension_kn, color="k", lw=1, label=f"oracle {oracle.tension_kn:.0f} kN (deterministic)")
+    if flight is not None:
+        t = [v for r in flight.segments for v in (r.segment.t_start, r.segment.t_end)]
+        kn = [v for r in flight.segments for v in 2 * (r.energy / max(r.segment.duration, 1e-9),)]
+        ax.plot(t, kn, color="C3", lw=1, label="judged tension of the setpoints flown (deterministic)")
     ax.set_xlabel("simulated time (s)")
     ax.set_ylabel("kN")
-    ax.set_title("mean tension per lap")
+    ax.set_title("mean tension per lap" + ("" if flight is None else
+                                           f"; yield of the whole flight {flight.percent:.2f} % of the oracle's"))
     _legend(ax, fontsize=7)
     ax = axes[1, 0]
     c_deg = np.array([r["c_deg"] for r in rows])

@@ -27,14 +27,14 @@ from ..gma import HistoryStore, StoreError
 from ..kite.params import KiteParams
 from ..kite.plant import PlantConfig
 from ..rto.experiment import ExperimentSpec
-from ..rto.judge import judge_point
+from ..rto.judge import judge_flight, judge_point
 from ..rto.oracle import find_oracle
 from ..rto.run import RUN_KEY, RunDescription
 from .mcap_history import history_from_mcap, read_mcap
 from .plots import plot_paths
 from .report_figure import report_figure
 
-__all__ = ["judge_iterates", "run_of", "write_report", "flight_report", "report_from_mcap", "main"]
+__all__ = ["judge_iterates", "yield_line", "run_of", "write_report", "flight_report", "report_from_mcap", "main"]
 
 
 def _deg(c) -> str:
@@ -62,6 +62,13 @@ def judge_iterates(history, config: PlantConfig, h_min: float, oracle) -> list[d
     return rows
 
 
+def yield_line(flight) -> str:
+    """The report's line about the yield of the whole flight (a :class:`~kite_rto.rto.flight_yield.FlightYield`)."""
+    parts = ", ".join(f"{k} {t:.0f} s at {p:.2f} %" for k, (t, p) in flight.by_purpose.items())
+    return (f"yield of the whole flight (learning included): {flight.percent:.2f} % of the oracle's energy over "
+            f"{flight.flight_time:.0f} s ({parts}); below the floor: {flight.below_floor_s:.0f} s")
+
+
 def run_of(history) -> RunDescription | None:
     """The :class:`~kite_rto.rto.run.RunDescription` stored with ``history`` (None when it holds none)."""
     data = history.meta.get(RUN_KEY)
@@ -83,7 +90,7 @@ def write_report(history, out: Path, run: RunDescription | None = None, samples=
         judge = False
     config, box = (run.plant, run.settings.box) if run is not None else (None, ShapeBox())
     h_min = run.h_min if run is not None else ExperimentSpec().h_min
-    oracle = None
+    oracle = flight = None
     if judge:
         print("\ncomputing the oracle (direct optimization of the deterministic plant; cached in $KITE_RTO_CACHE or "
               "the user cache directory) ...",
@@ -114,12 +121,16 @@ def write_report(history, out: Path, run: RunDescription | None = None, samples=
         print(f"\nmodel-only optimum (k = 0): {rows[0]['percent_of_oracle']:.2f} % of the oracle "
               f"(gap {summary['gap_model_only_percent']:.2f} %); final iterate: {rows[-1]['percent_of_oracle']:.2f} % "
               f"(gap {summary['gap_final_percent']:.2f} %); >= 99 % first at iteration: {reach}")
+        if history.experiments:
+            flight = judge_flight(config, h_min, oracle.tension_kn, history)
+            summary["flight_yield"] = flight.summary()
+            print(yield_line(flight))
     else:
         print("\n(not judged on the deterministic plant: measured values only)")
     summary.update(extra or {})
     out.mkdir(parents=True, exist_ok=True)
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
-    report_figure(history, rows, oracle, out, samples, laps, h_min)
+    report_figure(history, rows, oracle, out, samples, laps, h_min, flight)
     print(f"saved {out / 'report.png'} and {out / 'summary.json'}")
     return summary
 
