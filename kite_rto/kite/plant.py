@@ -18,10 +18,12 @@ from operator import itemgetter
 import numpy as np
 
 from .actuator import Actuator
-from .model import STEP_OUTPUT_NAMES, shared_model
+from .mean_wind import MeanWind, MeanWindSettings, edc_amplitude
+from .model import MIN_WIND_HEIGHT, STEP_OUTPUT_NAMES, shared_model
 from .params import KiteParams, ParameterError, check_range
-from .wind import TurbulenceSettings, UniformGust, WindModel
+from .wind import MIN_REFERENCE_WIND, TurbulenceSettings, UniformGust, WindModel
 from .wind_field import FieldWind, MannBox, WindFieldSettings
+from .wind_frame import rotate_state, rotate_vector, transpose, wind_rotation
 
 __all__ = ["PlantConfig", "NoiseSettings", "Measurement", "KitePlant", "PLANT_PARAMS", "WIND_MODELS",
            "DEFAULT_WIND_MODEL"]
@@ -40,6 +42,8 @@ _MEASURED_OUTPUTS = ("tension", "x", "y", "z", "theta_dot", "phi_dot", "psi_dot"
 _measured = itemgetter(*(STEP_OUTPUT_NAMES.index(n) for n in _MEASURED_OUTPUTS))
 """``step_py`` outputs -> the tuple :data:`_MEASURED_OUTPUTS` (one C call, by name)."""
 _ALTITUDE = STEP_OUTPUT_NAMES.index("altitude")
+_POSITION = STEP_OUTPUT_NAMES.index("x")              # x, y, z follow
+_RATES = STEP_OUTPUT_NAMES.index("theta_dot")         # theta_dot, phi_dot, psi_dot follow
 
 
 @dataclass(frozen=True)
@@ -77,6 +81,8 @@ class PlantConfig:
         launch_state: (theta, phi, psi) in rad after start and after every crash.
         wind_model: one of :data:`WIND_MODELS`; turbulence disabled means a steady wind with either.
         wind_field: :class:`~kite_rto.kite.wind_field.WindFieldSettings` of the ``"field"`` model.
+        mean_wind: :class:`~kite_rto.kite.mean_wind.MeanWindSettings`: how the mean wind drifts and turns (a
+            changing mean wind needs the ``"field"`` model with turbulence on).
     """
 
     params: KiteParams = PLANT_PARAMS
@@ -89,11 +95,16 @@ class PlantConfig:
     launch_state: tuple = (math.radians(30.0), 0.0, 0.0)
     wind_model: str = DEFAULT_WIND_MODEL
     wind_field: WindFieldSettings = field(default_factory=WindFieldSettings)
+    mean_wind: MeanWindSettings = field(default_factory=MeanWindSettings)
 
     def __post_init__(self):
         n = type(self).__name__
         if self.wind_model not in WIND_MODELS:
             raise ParameterError(f"{n}.wind_model = {self.wind_model!r}: expected one of {', '.join(WIND_MODELS)}")
+        if self.mean_wind.changes and not (self.wind_model == "field" and self.turbulence.enabled):
+            raise ParameterError(f"{n}.mean_wind = {self.mean_wind!r}: a changing mean wind needs wind_model "
+                                 f"'field' with turbulence enabled (got {self.wind_model!r}, turbulence "
+                                 f"{'on' if self.turbulence.enabled else 'off'})")
         check_range(n, "dt", self.dt, 0.0, 0.1, low_open=True)
         if isinstance(self.substeps, bool) or not isinstance(self.substeps, int) or self.substeps < 1:
             raise ParameterError(f"{n}.substeps = {self.substeps!r}: expected an integer >= 1")
@@ -111,14 +122,21 @@ class PlantConfig:
         model (reset to ``"uniform"``, and the field settings to their defaults, so equal kites compare equal)."""
         return replace(self, turbulence=TurbulenceSettings(enabled=False, anemometer_noise=0.0),
                        noise=NoiseSettings(0.0, 0.0, 0.0), wind_model="uniform",
-                       wind_field=WindFieldSettings())
+                       wind_field=WindFieldSettings(), mean_wind=MeanWindSettings())
 
-    def make_wind(self, seed: int, rng: np.random.Generator) -> WindModel:
+    def make_wind(self, seed: int, rng: np.random.Generator, mean_rng: np.random.Generator | None = None
+                  ) -> WindModel:
         """The :class:`~kite_rto.kite.wind.WindModel` this configuration describes, for plant seed ``seed`` (the
-        field's box seed) and the wind's own random stream ``rng``."""
+        field's box seed), the wind's own random stream ``rng`` and the mean wind's ``mean_rng``."""
         if self.wind_model == "field" and self.turbulence.enabled:
-            box = MannBox(self.wind_field, self.wind_field.sigma(self.params), seed)
-            return FieldWind(box, self.params, self.turbulence.anemometer_noise, rng)
+            fs = self.wind_field
+            box = MannBox(fs, fs.sigma(self.params), seed)
+            mean = None
+            if self.mean_wind.changes:
+                edc = edc_amplitude(fs.sigma(self.params), fs.hub_wind(self.params), self.mean_wind.edc_diameter)
+                mean = MeanWind(self.mean_wind, mean_rng if mean_rng is not None else np.random.default_rng(seed), edc)
+            return FieldWind(box, self.params, self.turbulence.anemometer_noise, rng, fs.components, mean,
+                             fs.vane_noise)
         return UniformGust(self.turbulence, self.params.w_ref, rng)
 
 
@@ -128,7 +146,8 @@ class Measurement:
 
     t s; theta, phi, psi rad; theta_dot, phi_dot, psi_dot rad/s; tension N; position (x, y, z) m in the anchor
     frame; wind_ref m/s (anemometer at z_ref); delta: steering currently applied at the kite (after dead time and
-    rate limit), normalized; crashes: crash count since start; step: sample index.
+    rate limit), normalized; crashes: crash count since start; step: sample index; wind_direction: wind vane at
+    z_ref, rad from the ground frame's x towards y (0 for a wind that never turns).
     """
 
     t: float
@@ -144,6 +163,7 @@ class Measurement:
     delta: float
     crashes: int
     step: int
+    wind_direction: float = 0.0
 
     @property
     def altitude(self) -> float:
@@ -155,7 +175,7 @@ _new = object.__new__
 
 
 def _measurement(t, theta, phi, psi, theta_dot, phi_dot, psi_dot, tension, position, wind_ref, delta, crashes,
-                 step) -> Measurement:
+                 step, wind_direction=0.0) -> Measurement:
     """Build a :class:`Measurement` without the frozen dataclass's per-field ``object.__setattr__`` (3-4x faster).
 
     The result is an ordinary ``Measurement`` (same fields, ``==``, ``hash``, ``repr``, ``replace``).
@@ -163,7 +183,7 @@ def _measurement(t, theta, phi, psi, theta_dot, phi_dot, psi_dot, tension, posit
     m = _new(Measurement)
     m.__dict__.update(t=t, theta=theta, phi=phi, psi=psi, theta_dot=theta_dot, phi_dot=phi_dot, psi_dot=psi_dot,
                       tension=tension, position=position, wind_ref=wind_ref, delta=delta, crashes=crashes,
-                      step=step)
+                      step=step, wind_direction=wind_direction)
     return m
 
 
@@ -180,8 +200,11 @@ class KitePlant:
         self.seed = int(seed)
         self.model = shared_model()
         self.dt = self.config.dt
-        gust_ss, noise_ss = np.random.SeedSequence(self.seed).spawn(2)
-        self.wind = self.config.make_wind(self.seed, np.random.default_rng(gust_ss))
+        gust_ss, noise_ss, mean_ss = np.random.SeedSequence(self.seed).spawn(3)   # the first two as with spawn(2)
+        self.wind = self.config.make_wind(self.seed, np.random.default_rng(gust_ss), np.random.default_rng(mean_ss))
+        self._turns = self.wind.turns
+        kp = self.config.params
+        self._r, self._z_ref, self._shear = kp.r, kp.z_ref, kp.shear
         self._noise_rng = np.random.default_rng(noise_ss)
         self._p = self.config.params.as_vector()
         self._i_wref = KiteParams.names().index("w_ref")
@@ -231,18 +254,48 @@ class KitePlant:
         t = self.t = self.k * self._dt_ns * 1e-9
         wind = self.wind
         wind.advance(t)
-        p = self._p
-        p[self._i_wref] = wind.kite_reference_wind(self._last.position)     # at the step's start position
-        x = self.state
-        h, step_py = self._h, self._step_py
-        for _ in self._substeps:
-            x, out = step_py(x, ad, p, h)
+        if self._turns:
+            x, out = self._step_in_wind_frame(ad)
+        else:
+            p = self._p
+            p[self._i_wref] = wind.kite_reference_wind(self._last.position)     # at the step's start position
+            x = self.state
+            h, step_py = self._h, self._step_py
+            for _ in self._substeps:
+                x, out = step_py(x, ad, p, h)
         self.state, self._out = x, out
         # one finiteness test for all values: a sum is NaN or infinite iff a term is (or beyond 1e308, not a kite)
         if not (out[_ALTITUDE] > 0.0 and x[0] > 0.0 and _isfinite(sum(x) + sum(out))):
             self._relaunch()
         m = self._last = self._measure()
         return m
+
+    def _step_in_wind_frame(self, ad: float) -> tuple:
+        """One sample in a wind that turns: the state (ground frame) turned into the frame of the wind at the kite
+        (:mod:`~kite_rto.kite.wind_frame`), the model integrated there with the reference wind whose profile gives
+        that wind at the kite's height in that frame, and the state, position and rates turned back."""
+        speed, direction, tilt = self.wind.kite_wind(self._last.position)     # at the step's start position
+        rot = wind_rotation(direction, tilt)
+        back = transpose(rot)
+        xf = rotate_state(self.state, rot)
+        zf = self._r * math.sin(xf[0]) * math.cos(xf[1])
+        w_ref = speed * (self._z_ref / max(zf, MIN_WIND_HEIGHT)) ** self._shear
+        p = self._p
+        p[self._i_wref] = max(w_ref, MIN_REFERENCE_WIND)
+        h, step_py = self._h, self._step_py
+        for _ in self._substeps:
+            xf, out = step_py(xf, ad, p, h)
+        x = rotate_state(xf, back)
+        out = list(out)
+        i = _POSITION
+        out[i:i + 3] = rotate_vector(back, out[i:i + 3])
+        out[_ALTITUDE] = out[i + 2]
+        # rates in the ground frame: the frame's map applied to a short step along the frame's rates
+        eps = 1e-3
+        rf = out[_RATES:_RATES + 3]
+        ahead = rotate_state([a + eps * r for a, r in zip(xf, rf)], back)
+        out[_RATES:_RATES + 3] = [math.remainder(a - b, math.tau) / eps for a, b in zip(ahead, x)]
+        return x, out
 
     def reset(self) -> Measurement:
         """Relaunch from the launch state (crash count and time are kept)."""
@@ -274,4 +327,5 @@ class KitePlant:
         return _measurement(self.t, x[0] + sa * e0, x[1] + sa * e1, x[2] + sa * e2,
                             theta_dot + sr * e3, phi_dot + sr * e4, psi_dot + sr * e5,
                             tension * (1.0 + st * e6), (px, py, pz),
-                            self.wind.anemometer(), self.actuator.applied, self.crashes, self.k)
+                            self.wind.anemometer(), self.actuator.applied, self.crashes, self.k,
+                            self.wind.vane() if self._turns else 0.0)

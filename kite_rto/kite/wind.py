@@ -64,7 +64,21 @@ class TurbulenceSettings:
 
 class WindModel(ABC):
     """What the plant asks the wind once per sample, in this order: :meth:`advance` to the sample's time, then
-    :meth:`kite_reference_wind` at the kite's position, then :meth:`anemometer` for the measurement."""
+    :meth:`kite_reference_wind` at the kite's position (or, for a wind that :attr:`turns`, :meth:`kite_wind`), then
+    :meth:`anemometer` and :meth:`vane` for the measurements."""
+
+    turns = False
+    """The wind at the kite changes direction (the plant then asks :meth:`kite_wind`)."""
+
+    def kite_wind(self, position: tuple) -> tuple:
+        """``(speed m/s, direction rad, tilt rad)`` of the wind at ``position`` (m, ground frame); models that
+        :attr:`turn <turns>` implement it."""
+        raise NotImplementedError(f"{type(self).__name__} keeps its direction: ask kite_reference_wind")
+
+    def vane(self) -> float:
+        """Wind vane reading at ``(0, 0, z_ref)``, rad from the ground frame's x towards y (0 for a wind that never
+        turns)."""
+        return 0.0
 
     @abstractmethod
     def advance(self, t: float) -> None:

@@ -6,9 +6,14 @@ The wind at a point ``(x, y, z)`` (m, anchor frame: x downwind, z up) at time ``
 
 with ``U(z) = w_ref (z / z_ref)^a`` the plant's power-law profile (SPEC §2), ``u'`` the longitudinal component of
 the box (Taylor's frozen turbulence, advected at the mean wind at hub height ``U_hub = U(z_hub)``; the box tiles
-periodically along x, as the Mann box is periodic there), interpolated trilinearly. The kite's model knows only a
-wind along x, so only ``u'`` enters (the lateral and vertical components, ~0.7 and ~0.5 of sigma_u, are generated
-with it but not used). The ground-station anemometer at ``(0, 0, z_ref)`` reads the same field there.
+periodically along x, as the Mann box is periodic there), interpolated trilinearly. With ``components = "u"`` only
+``u'`` enters and the wind keeps its direction. With ``components = "uvw"`` the wind at a point is the vector
+``(U(z) + u', v', w')`` (the lateral and vertical components, ~0.7-0.8 and ~0.5 of sigma_u in the box), so it turns
+and tilts with the gusts: :meth:`FieldWind.kite_wind` gives its speed, direction and tilt, and the plant flies the
+model in the frame of that wind (:mod:`~kite_rto.kite.wind_frame`). A drifting mean wind
+(:mod:`~kite_rto.kite.mean_wind`) scales ``U`` and turns the whole field, the box advected along the mean direction.
+The ground-station anemometer (horizontal speed) and wind vane (direction) at ``(0, 0, z_ref)`` read the same field
+there.
 
 Turbulence (IEC 61400-1 ed. 3, normal turbulence model, section 6.3 and annex C):
 
@@ -45,16 +50,20 @@ import numpy as np
 from ..cache import cache_dir as shared_cache_dir
 from .model import MIN_WIND_HEIGHT
 from .params import KiteParams, ParameterError, check_range
+from .mean_wind import MeanWind
 from .wind import MIN_REFERENCE_WIND, NormalBlocks, WindModel
 
-__all__ = ["WindFieldSettings", "MannBox", "FieldWind", "cache_dir", "IEC_REFERENCE_INTENSITY",
+__all__ = ["WindFieldSettings", "MannBox", "FieldWind", "FIELD_COMPONENTS", "cache_dir", "IEC_REFERENCE_INTENSITY",
            "iec_coherence", "IEC_COHERENCE_SCALE"]
 
 IEC_REFERENCE_INTENSITY = {"A": 0.16, "B": 0.14, "C": 0.12}
 """IEC 61400-1 ed. 3 turbulence categories: expected turbulence intensity I_ref at 15 m/s."""
 IEC_COHERENCE_SCALE = 8.1 * 42.0
 """IEC 61400-1 ed. 3 coherence scale parameter L_c = 8.1 Lambda_1, Lambda_1 = 42 m above 60 m; m."""
-_FORMAT = "v1"          # part of the cache key: change it when the generation or scaling changes
+FIELD_COMPONENTS = ("u", "uvw")
+"""Components of the box the kite flies in: the longitudinal one alone (the wind keeps its direction), or all three
+(the wind at the kite turns and tilts with the gusts)."""
+_FORMAT = "v2"          # part of the cache key: change it when the generation or scaling changes
 
 
 def _cell(f: float, n: int) -> tuple:
@@ -65,6 +74,18 @@ def _cell(f: float, n: int) -> tuple:
         return n - 2, 1.0
     i = int(f)
     return i, f - i
+
+
+def _trilinear(u, a: int, b: int, nz: int, ax: float, ay: float, az: float) -> float:
+    """Trilinear interpolation in the flat box ``u`` between the columns at flat indices ``a`` (x below) and ``b``
+    (x above), ``nz`` the stride along y, at the fractions ``ax, ay, az``."""
+    bz = 1.0 - az
+    c00 = u[a] * bz + u[a + 1] * az
+    c01 = u[a + nz] * bz + u[a + nz + 1] * az
+    c10 = u[b] * bz + u[b + 1] * az
+    c11 = u[b + nz] * bz + u[b + nz + 1] * az
+    by = 1.0 - ay
+    return (c00 * by + c01 * ay) * (1.0 - ax) + (c10 * by + c11 * ay) * ax
 
 
 def iec_coherence(f, separation: float, mean_wind: float, scale: float = IEC_COHERENCE_SCALE):
@@ -92,6 +113,8 @@ class WindFieldSettings:
         gamma: Mann anisotropy parameter Gamma (>= 0).
         points: box points (Nx, Ny, Nz) along x (downwind), y, z; each >= 4.
         spacing: box spacing (dx, dy, dz), m (> 0).
+        components: one of :data:`FIELD_COMPONENTS`: ``"u"`` (the longitudinal component alone) or ``"uvw"``.
+        vane_noise: white noise standard deviation of the ground station's wind vane, rad (>= 0).
     """
 
     turbulence_class: str = "B"
@@ -100,6 +123,8 @@ class WindFieldSettings:
     gamma: float = 3.9
     points: tuple = (2048, 32, 32)
     spacing: tuple = (8.0, 16.0, 10.0)
+    components: str = "u"
+    vane_noise: float = math.radians(2.0)
 
     def __post_init__(self):
         n = type(self).__name__
@@ -115,6 +140,10 @@ class WindFieldSettings:
             raise ParameterError(f"{n}.spacing = {self.spacing!r}: expected (dx, dy, dz)")
         for i, v in enumerate(self.spacing):
             check_range(n, f"spacing[{i}]", v, 0.0, low_open=True)
+        if self.components not in FIELD_COMPONENTS:
+            raise ParameterError(f"{n}.components = {self.components!r}: expected one of "
+                                 f"{', '.join(FIELD_COMPONENTS)}")
+        check_range(n, "vane_noise", self.vane_noise, 0.0)
 
     def hub_wind(self, params: KiteParams) -> float:
         """Mean wind at hub height of the power-law profile of ``params``, m/s."""
@@ -126,7 +155,7 @@ class WindFieldSettings:
 
 
 class MannBox:
-    """The longitudinal turbulence ``u'`` (m/s) of one Mann box, generated once per seed and settings and cached.
+    """The turbulence ``u', v', w'`` (m/s) of one Mann box, generated once per seed and settings and cached.
 
     The cache holds the box as generated with ``alpha-eps^(2/3) = 1`` (float32); loading it memory-maps the file
     and scales it to zero mean and standard deviation ``sigma``.
@@ -138,8 +167,11 @@ class MannBox:
         directory: cache directory (:func:`cache_dir` if None).
 
     Attributes:
-        raw: float32 array (Nx, Ny, Nz) as generated, read-only (memory-mapped from the cache file).
-        offset, scale: ``u' = scale * raw - offset`` (m/s).
+        raw_uvw: float32 array (3, Nx, Ny, Nz) of the components u, v, w as generated, read-only (memory-mapped
+            from the cache file).
+        raw: its u component.
+        offset, scale: ``u' = scale * raw - offset`` (m/s); the same ``scale`` for v' and w' (the box's own ratios of
+            the components' variances), each with its own offset (:attr:`offsets`: zero means).
         alpha_epsilon: the box's equivalent Mann ``alpha-eps^(2/3)``, ``scale^2``, m^(4/3)/s^2.
         path: the cache file.
         generated: True if this object generated the box (False: read from the cache).
@@ -166,10 +198,12 @@ class MannBox:
             except BaseException:
                 os.unlink(tmp)
                 raise
-        self.raw = np.load(self.path, mmap_mode="r")
+        self.raw_uvw = np.load(self.path, mmap_mode="r")
+        self.raw = self.raw_uvw[0]
         mean, std = float(self.raw.mean(dtype=np.float64)), float(self.raw.std(dtype=np.float64))
         self.scale = self.sigma / std
         self.offset = self.scale * mean
+        self.offsets = tuple(self.scale * float(c.mean(dtype=np.float64)) for c in self.raw_uvw)
         self.alpha_epsilon = self.scale**2
 
     def _generate(self) -> np.ndarray:
@@ -177,11 +211,15 @@ class MannBox:
         s = self.settings
         field = MannTurbulenceField.generate(alphaepsilon=1.0, L=s.length_scale, Gamma=s.gamma, Nxyz=s.points,
                                              dxyz=s.spacing, seed=self.seed, n_cpu=1)
-        return np.ascontiguousarray(field.uvw[0], dtype=np.float32)
+        return np.ascontiguousarray(field.uvw, dtype=np.float32)
 
     def u(self) -> np.ndarray:
         """The scaled box ``u'``, m/s, float64 array (Nx, Ny, Nz) (a copy)."""
         return self.scale * np.asarray(self.raw, dtype=np.float64) - self.offset
+
+    def component(self, i: int) -> np.ndarray:
+        """The scaled component ``i`` (0 u', 1 v', 2 w'; zero mean), m/s, float64 array (Nx, Ny, Nz) (a copy)."""
+        return self.scale * np.asarray(self.raw_uvw[i], dtype=np.float64) - self.offsets[i]
 
 
 class FieldWind(WindModel):
@@ -197,7 +235,11 @@ class FieldWind(WindModel):
     the box in y or z the nearest face is used.
     """
 
-    def __init__(self, box: MannBox, params: KiteParams, anemometer_noise: float, rng: np.random.Generator):
+    def __init__(self, box: MannBox, params: KiteParams, anemometer_noise: float, rng: np.random.Generator,
+                 components: str = "u", mean: MeanWind | None = None, vane_noise: float = 0.0):
+        if components not in FIELD_COMPONENTS:
+            raise ParameterError(f"FieldWind.components = {components!r}: expected one of "
+                                 f"{', '.join(FIELD_COMPONENTS)}")
         s = box.settings
         self.box = box
         self.w_ref0 = float(params.w_ref)
@@ -213,21 +255,48 @@ class FieldWind(WindModel):
         self._shift = 0.0                              # U_hub t, m
         self._noise_std = float(anemometer_noise)
         self._normals = NormalBlocks(rng)
+        self.components = components
+        self.mean = mean
+        self.turns = components == "uvw" or (mean is not None and mean.settings.changes)
+        """The wind at the kite changes direction: the plant asks :meth:`kite_wind` instead of
+        :meth:`kite_reference_wind`."""
+        self._vane_std = float(vane_noise)
+        self._t = 0.0
+        three = components == "uvw"
+        self._flat_v = memoryview(np.ascontiguousarray(box.raw_uvw[1]).reshape(-1)) if three else None
+        self._flat_w = memoryview(np.ascontiguousarray(box.raw_uvw[2]).reshape(-1)) if three else None
         # the anemometer's line of the box at (y, z) = (0, z_ref), one value per x point: one linear interpolation
-        # per sample instead of a trilinear one
+        # per sample instead of a trilinear one (u', and v' for the vane)
         dx = float(s.spacing[0])
-        self._anemometer_line = []
+        self._anemometer_line, self._vane_line = [], []
         for i in range(nx):
             self._shift = -i * dx
             self._anemometer_line.append(self.turbulence_at(0.0, 0.0, self._z_ref))
+            self._vane_line.append(self.turbulence3_at(0.0, 0.0, self._z_ref)[1] if three else 0.0)
         self._shift = 0.0
 
     def advance(self, t: float) -> None:
-        """Advect the frozen box to time ``t`` (s)."""
-        self._shift = self.mean_speed * t
+        """Advect the frozen box to time ``t`` (s) (at the hub-height mean wind of each moment when it drifts)."""
+        mean = self.mean
+        if mean is None:
+            self._shift = self.mean_speed * t
+            return
+        factor = mean.speed_factor
+        mean.advance(t)
+        self._shift += self.mean_speed * 0.5 * (factor + mean.speed_factor) * (t - self._t)
+        self._t = t
 
-    def turbulence_at(self, x: float, y: float, z: float) -> float:
-        """u' (m/s) at the point (x, y, z) m at the current time (trilinear)."""
+    def turbulence3_at(self, x: float, y: float, z: float) -> tuple:
+        """(u', v', w') (m/s) at the point (x, y, z) m of the box's frame at the current time (trilinear; u' as
+        :meth:`turbulence_at` computes it, to the bit)."""
+        if self._flat_v is None:
+            return self.turbulence_at(x, y, z), 0.0, 0.0
+        cell = self._cell_of(x, y, z)
+        return tuple(self._scale * _trilinear(u, *cell) - off
+                     for u, off in zip((self._flat, self._flat_v, self._flat_w), (self._offset,) + self.box.offsets[1:]))
+
+    def _cell_of(self, x: float, y: float, z: float) -> tuple:
+        """The flat indices of the two corner columns of the point's cell, the stride along z and the fractions."""
         nx, ny, nz = self._n
         ix_, iy_, iz_ = self._inv
         fx = (x - self._shift) * ix_
@@ -237,17 +306,54 @@ class FieldWind(WindModel):
         i1 = i0 + 1 if i0 + 1 < nx else 0
         j, ay = _cell((y - self._y0) * iy_, ny)
         k, az = _cell(z * iz_, nz)
-        u, nyz = self._flat, ny * nz
-        a = i0 * nyz + j * nz + k
-        b = i1 * nyz + j * nz + k
-        bz = 1.0 - az
-        c00 = u[a] * bz + u[a + 1] * az
-        c01 = u[a + nz] * bz + u[a + nz + 1] * az
-        c10 = u[b] * bz + u[b + 1] * az
-        c11 = u[b + nz] * bz + u[b + nz + 1] * az
-        by = 1.0 - ay
-        raw = (c00 * by + c01 * ay) * (1.0 - ax) + (c10 * by + c11 * ay) * ax
-        return self._scale * raw - self._offset
+        nyz = ny * nz
+        return i0 * nyz + j * nz + k, i1 * nyz + j * nz + k, nz, ax, ay, az
+
+    def kite_wind(self, position: tuple) -> tuple:
+        """The wind at ``position`` (x, y, z) m of the ground frame: ``(speed m/s, direction rad, tilt rad)``, the
+        direction from the ground frame's x towards its y (about z up), the tilt upwards.
+
+        The mean wind (speed factor and direction of :attr:`mean`) carries the box: the point is turned into the
+        mean wind's frame, the box sampled there, and its components added to the mean profile along that frame.
+        """
+        x, y, z = position
+        mean = self.mean
+        factor, chi = (mean.speed_factor, mean.direction) if mean is not None else (1.0, 0.0)
+        if chi:
+            c, s_ = math.cos(chi), math.sin(chi)
+            x, y = c * x + s_ * y, -s_ * x + c * y
+        hz = z if z > MIN_WIND_HEIGHT else MIN_WIND_HEIGHT
+        along = self.w_ref0 * factor * (hz / self._z_ref) ** self._shear
+        du, dv, dw = self.turbulence3_at(x, y, z)
+        along += du
+        horizontal = math.hypot(along, dv)
+        return (math.sqrt(horizontal * horizontal + dw * dw), chi + math.atan2(dv, along), math.atan2(dw, horizontal))
+
+    def vane(self) -> float:
+        """Wind vane reading at (0, 0, z_ref), rad from the ground frame's x towards y: the mean direction plus the
+        horizontal direction of the turbulence there plus measurement noise."""
+        mean = self.mean
+        factor, chi = (mean.speed_factor, mean.direction) if mean is not None else (1.0, 0.0)
+        along, dv = self._line_values()
+        d = chi + math.atan2(dv, self.w_ref0 * factor + along)
+        if self._vane_std > 0:
+            d += self._vane_std * self._normals.next()
+        return d
+
+    def _line_values(self) -> tuple:
+        """(u', v') at the anemometer, m/s (linear along the lines)."""
+        fx = -self._shift * self._inv[0]
+        fl = math.floor(fx)
+        ax = fx - fl
+        n = len(self._anemometer_line)
+        i0 = int(fl) % n
+        i1 = i0 + 1 if i0 + 1 < n else 0
+        u, v = self._anemometer_line, self._vane_line
+        return u[i0] + (u[i1] - u[i0]) * ax, v[i0] + (v[i1] - v[i0]) * ax
+
+    def turbulence_at(self, x: float, y: float, z: float) -> float:
+        """u' (m/s) at the point (x, y, z) at the current time (trilinear)."""
+        return self._scale * _trilinear(self._flat, *self._cell_of(x, y, z)) - self._offset
 
     def kite_reference_wind(self, position: tuple) -> float:
         """``w_ref0 + u' (z_ref / z)^a``: the reference wind whose profile passes through ``U(z) + u'`` at the
@@ -258,7 +364,14 @@ class FieldWind(WindModel):
         return MIN_REFERENCE_WIND if MIN_REFERENCE_WIND > w else w
 
     def anemometer(self) -> float:
-        """Anemometer reading at (0, 0, z_ref), m/s: mean wind plus u' there plus measurement noise."""
+        """Anemometer reading at (0, 0, z_ref), m/s: the horizontal speed of the mean wind plus the turbulence
+        there (u' alone, or u' and v' with ``components = "uvw"``) plus measurement noise."""
+        if self.turns:
+            along, dv = self._line_values()
+            w = math.hypot(self.w_ref0 * (self.mean.speed_factor if self.mean is not None else 1.0) + along, dv)
+            if self._noise_std > 0:
+                w += self._noise_std * self._normals.next()
+            return 0.0 if 0.0 > w else w
         fx = -self._shift * self._inv[0]
         fl = math.floor(fx)
         ax = fx - fl

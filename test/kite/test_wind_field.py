@@ -14,20 +14,6 @@ SMALL = WindFieldSettings(points=(1024, 32, 16), spacing=(8.0, 16.0, 20.0))     
 TINY = WindFieldSettings(points=(64, 8, 8), spacing=(8.0, 16.0, 20.0))
 
 
-@pytest.fixture(scope="module")
-def module_cache(tmp_path_factory):
-    """One cache directory for the module: each box is generated once."""
-    with pytest.MonkeyPatch.context() as mp:
-        path = tmp_path_factory.mktemp("wind_cache")
-        mp.setenv("KITE_RTO_CACHE", str(path))
-        yield path
-
-
-@pytest.fixture
-def cache(module_cache):
-    return module_cache
-
-
 def field(seed=1, settings=SMALL, noise=0.0):
     box = MannBox(settings, settings.sigma(PLANT_PARAMS), seed)
     return FieldWind(box, PLANT_PARAMS, noise, np.random.default_rng(0))
