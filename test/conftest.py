@@ -25,6 +25,8 @@ NOT_QUICK = {
     "test_gma_safety.py::test_default_steps_violate_the_plant_constraint",
     "test_controller.py::test_smooth_setpoint_change",
     "test_wind_field.py::test_box_mean_and_intensity",
+    "test_wind_turns.py::test_a_30_degree_turn_left_at_the_old_azimuth_costs_about_cos_squared",   # long flights
+    "test_wind_follow.py::test_after_a_30_degree_turn_the_path_follows_and_keeps_the_energy",      # in a turning wind
 }
 """Pure tests left out of the quick tier (a file name, or file name::test name without parameters): each file or
 test takes seconds, the tier's budget is a minute on 2 cores (docs/testing.md)."""

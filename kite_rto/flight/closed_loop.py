@@ -26,7 +26,7 @@ class ClosedLoopResult:
     """Time series of one closed-loop run, one row per sample: the measurement the controller received and
     what it answered.
 
-    Arrays: t s; theta, phi, psi rad (measured); delta (command answering the sample); tension N;
+    Arrays: t s; theta, phi, psi rad (measured, in the path's frame: :meth:`PathController.in_path_frame`); delta (command answering the sample); tension N;
     altitude m; wind_ref m/s; s path parameter; cross_track rad (signed, at the measured position).
     laps: :class:`LapStats` of the complete laps; crashes: plant crash count during the run.
     """
@@ -79,10 +79,11 @@ def run_closed_loop(plant: KitePlant, controller: PathController, duration: floa
         if m.crashes != crashes:
             crashes = m.crashes
             laps.reset()
+        mp = controller.in_path_frame(m)         # laps are counted around the path, wherever it is centred
         z = m.position[2]
-        laps.update(m.t, m.theta, m.phi, m.tension, z, status.cross_track, m.wind_ref)
+        laps.update(m.t, mp.theta, mp.phi, m.tension, z, status.cross_track, m.wind_ref)
         if record:
-            rows[k] = (m.t, m.theta, m.phi, m.psi, delta, m.tension, z, m.wind_ref, status.s, status.cross_track)
+            rows[k] = (m.t, mp.theta, mp.phi, mp.psi, delta, m.tension, z, m.wind_ref, status.s, status.cross_track)
         m = plant.step(delta)
     crashes = m.crashes
     cols = {name: rows[:, i].copy() for i, name in enumerate(_SERIES)}

@@ -29,6 +29,7 @@ from ..kite.actuator import Actuator, step_toward
 from ..kite.model import KiteModel
 from ..kite.params import KiteParams, check_range
 from .path import DEFAULT_TURN_MARGIN, FigureEightPath, SetpointBox, Setpoints, SetpointError, validate_setpoints
+from .wind_follow import WindFollower, WindFollowSettings
 
 __all__ = ["ControllerSettings", "ControllerStatus", "PathController", "SetpointError"]
 
@@ -57,6 +58,8 @@ class ControllerSettings:
         speed_filter: time constant of the wind-scale estimate (measured vs model speed), s.
         gain_filter: time constant of the steering-gain estimate, s (0 disables it).
         box: accepted setpoint box.
+        follow_wind: :class:`~kite_rto.flight.wind_follow.WindFollowSettings`: centre the path on the estimated
+            mean wind direction (the measurement's ``wind_direction``, a wind vane).
     """
 
     dt: float = 0.02
@@ -72,6 +75,7 @@ class ControllerSettings:
     speed_filter: float = 3.0
     gain_filter: float = 5.0
     box: SetpointBox = field(default_factory=SetpointBox)
+    follow_wind: WindFollowSettings = field(default_factory=WindFollowSettings)
 
     def __post_init__(self):
         n = type(self).__name__
@@ -94,7 +98,7 @@ class ControllerStatus:
     s: path parameter of the measured position; cross_track: its signed cross-track error, rad;
     s_pred / cross_track_pred: same at the dead-time-predicted state; delta: command sent;
     saturated: True if the command hit delta_max; wind_scale, gain_scale: on-line correction factors;
-    setpoints: the (blended) setpoints in use.
+    setpoints: the (blended) setpoints in use; direction: the azimuth the path is centred on, rad.
     """
 
     s: float = 0.0
@@ -106,6 +110,7 @@ class ControllerStatus:
     wind_scale: float = 1.0
     gain_scale: float = 1.0
     setpoints: Setpoints | None = None
+    direction: float = 0.0
 
 
 class PathController:
@@ -144,6 +149,8 @@ class PathController:
         self._gain_num = 0.0
         self._gain_den = 0.0
         self.status = ControllerStatus(setpoints=self._c)
+        self.wind = WindFollower(st.follow_wind, st.dt) if st.follow_wind.enabled else None
+        """The :class:`~kite_rto.flight.wind_follow.WindFollower` the path follows (None: the path stays put)."""
 
     # ----------------------------------------------------------------------------- setpoints
     def _validate(self, c) -> Setpoints:
@@ -195,12 +202,20 @@ class PathController:
                          a.A_theta + w * (b.A_theta - a.A_theta))
 
     # ------------------------------------------------------------------------------- control
+    def in_path_frame(self, m):
+        """``m`` as the path sees it: turned to the direction the path is centred on (``m`` itself when the path
+        does not follow the wind); what lap detection and experiments read."""
+        return m if self.wind is None else self.wind.to_path_frame(m)
+
     def command(self, m) -> float:
         """Steering command for measurement ``m`` (one call per sample), normalized, ``|delta| <= delta_max``."""
         st = self.settings
         if self._blend < 1.0:
             self._blend = min(1.0, self._blend + st.dt / st.blend_time)
             self.path = FigureEightPath(self._current_setpoints())
+        if self.wind is not None:
+            self.status.direction = self.wind.update(m.wind_direction)
+            m = self.wind.to_path_frame(m)
         theta, phi, psi = m.theta, m.phi, m.psi
         p = self._p
         p[self._i_wref] = max(m.wind_ref, 0.5) * self._wind_scale

@@ -83,7 +83,7 @@ def run_rto(plant_config: PlantConfig | None = None, seed: int = 0, n_iter: int 
         if new is not None:
             controller.set_setpoints(Setpoints.from_array(new))
         m = plant.step(controller.command(m))
-        new = session.on_measurement(m)
+        new = session.on_measurement(controller.in_path_frame(m))
     iterates = [setpoints_from_shape(gma.history.c0 if k0 == 0 else gma.records[k0 - 1].c_next)]
     iterates += [setpoints_from_shape(r.c_next) for r in gma.records[k0:]]
     return RTOResult(records=list(gma.records[k0:]), experiments=session.experiments,
