@@ -7,7 +7,7 @@ The core knows nothing about kites and never imports ``rclpy``. See ``docs/gma.m
 The iteration (:class:`GMA`) is small; optional mechanisms take part at named points of it
 (:mod:`~kite_rto.gma.mechanism`), each configured by its own settings object in :class:`GMASettings`
 (``None`` = off): :class:`ModifierFilter`, :class:`NoiseFilter`, :class:`TrustRegion`, :class:`SafeStep`,
-:class:`Undo`, :class:`BoundHold`, :class:`ModelSecant`.
+:class:`Undo`, :class:`BoundHold`, :class:`ModelSecant`, :class:`Settle`.
 """
 from .bound_hold import BoundHold, bound_side
 from .directional import DirectionalGradient, PrivilegedDirections, lagrangian_gradient, privileged_directions
@@ -23,6 +23,7 @@ from .problem import ModelProblem
 from .records import ExperimentRequest, ExperimentResult, History, IterationRecord
 from .robust_bounds import BoundActivity, model_optimum, robust_bounds
 from .safe_step import SafeStep
+from .settle import Settle
 from .settings import MECHANISMS, GMASettings, ModelSettings
 from .store import HistoryStore, StoreError
 from .trust_region import TrustRegion
@@ -31,7 +32,7 @@ from .undo import Undo
 __all__ = ["HistoryStore", "StoreError",
            "ModelProblem", "GMASettings", "ModelSettings", "MECHANISMS", "GMA", "ModelRealization", "Modifiers",
            "Decision", "Mechanism", "Iteration",
-           "ModifierFilter", "NoiseFilter", "TrustRegion", "SafeStep", "Undo", "BoundHold", "ModelSecant",
+           "ModifierFilter", "NoiseFilter", "TrustRegion", "SafeStep", "Undo", "BoundHold", "ModelSecant", "Settle",
            "GradientEstimator", "GradientEstimate", "PlantPoint", "FiniteDifferenceGradient", "LeastSquaresGradient",
            "DirectionalGradient", "PrivilegedDirections", "privileged_directions", "lagrangian_gradient",
            "ExperimentRequest", "ExperimentResult", "IterationRecord", "History", "run_offline",

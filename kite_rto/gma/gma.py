@@ -53,7 +53,8 @@ class GMA:
         self.gradient = gradient if gradient is not None else FiniteDifferenceGradient(0.01 * self._width)
         self._nlps = NLPPair(problem, s.model)
         self._model = ModelSide(problem, self._nlps, s.model)
-        self.mechanisms: list[Mechanism] = s.build(problem) + list(mechanisms)
+        self._extra = list(mechanisms)
+        self.mechanisms: list[Mechanism] = s.build(problem) + self._extra
         if history is not None:
             self.history = deepcopy(history)
             self._resume()
@@ -189,10 +190,15 @@ class GMA:
         """Plan the experiments of iteration ``k``: the nominal point, then the strategy's perturbations."""
         self.history.pending = self._requests(self._c, f"k{self._k}")
 
+    def _watcher(self) -> Mechanism | None:
+        """The mechanism that has the open iteration fly its nominal point alone (None: the iteration learns)."""
+        return next((m for m in self.mechanisms if m.perturb() is False), None)
+
     def _requests(self, c: np.ndarray, tag: str) -> list[ExperimentRequest]:
         """The requests of the open iteration at operating point ``c`` (nominal first), ids ``<tag>-<j>-...``."""
         pr, k = self.problem, self._k
-        pert = self.gradient.plan(c, pr.c_lb, pr.c_ub, self._points(exclude_iteration=k))
+        pert = [] if self._watcher() is not None else self.gradient.plan(c, pr.c_lb, pr.c_ub,
+                                                                          self._points(exclude_iteration=k))
         plan = [(c.copy(), "nominal")] + [(np.asarray(x, float), "perturbation") for x in pert]
         effort = self.settings.effort_at(k)
         return [ExperimentRequest(f"{tag}-{j}-{purpose}", x, purpose, k, effort) for j, (x, purpose) in enumerate(plan)]
@@ -238,15 +244,19 @@ class GMA:
 
     def _complete(self) -> IterationRecord:
         """Close iteration ``k``: gradients, modifiers, the modified problem, the filtered step, the record."""
-        self.prepare()          # before any CasADi call here: a worker thread may still be building the NLPs
         t0 = time.perf_counter()
         pr, k, c_k = self.problem, self._k, self._c.copy()
         results = {q.request_id: (q, r) for q, r in self.history.experiments if q.iteration == k}
         ordered = [results[q.request_id] for q in self.history.pending]
         points = [_plant_point(q, r) for q, r in ordered]
+        watcher = self._watcher()
+        if watcher is not None and len(points) == 1:
+            return self._watched(watcher, k, c_k, points[0], ordered, t0)
+        self.prepare()          # before any CasADi call here: a worker thread may still be building the NLPs
         model = self.linearize(c_k)
-        it = Iteration(k, c_k, points[0], points[1:], self._points(exclude_iteration=k), model, pr, self.history,
-                       self.gradient, lambda c: self._model.values(c, model.u), nominal_id=ordered[0][0].request_id)
+        it = Iteration(k, c_k, points[0], points[1:], self._points(exclude_iteration=k), model, pr,
+                       self._since_watch(), self.gradient, lambda c: self._model.values(c, model.u),
+                       nominal_id=ordered[0][0].request_id)
         it.estimate = self.gradient.estimate(c_k, it.nominal, it.new, it.past, model)
         self._call("estimate", it)
         it.notes = [it.estimate.notes] if it.estimate.notes else []
@@ -277,6 +287,32 @@ class GMA:
             grad_cost_std=None if est.cost_std is None else np.asarray(est.cost_std, float).copy())
         self.history.iterations.append(rec)
         self._k, self._c = k + 1, c_next
+        self._plan()
+        return rec
+
+    def _since_watch(self) -> History:
+        """The history the mechanisms see: the run since the last watched iteration (the whole run when none)."""
+        recs = self.history.iterations
+        last = next((i for i in range(len(recs) - 1, -1, -1) if recs[i].outcome is Decision.WATCHED), None)
+        return self.history if last is None else replace(self.history, iterations=recs[last + 1:])
+
+    def _watched(self, watcher: Mechanism, k: int, c_k: np.ndarray, nominal: PlantPoint, ordered,
+                 t0: float) -> IterationRecord:
+        """Close a watched iteration: ``c_k`` measured alone, tested by ``watcher``, kept; the record repeats the
+        last learning iteration's gradients and modifiers. When ``watcher`` finds a change, the mechanisms of
+        :class:`GMASettings` are built anew (those passed as ``mechanisms`` keep their state)."""
+        last = self.history.iterations[-1]
+        why = watcher.watch(nominal)
+        notes = [f"change detected, learning again: {why}"] if why else ["settled point watched"]
+        if why:                 # another plant: GMA's own mechanisms start afresh (the trust region at its start)
+            self.mechanisms = self.settings.build(self.problem) + self._extra
+        rec = replace(last, k=k, c_k=c_k, cost=nominal.cost, constraints=nominal.constraints.copy(),
+                      step=np.zeros_like(c_k), c_next=c_k.copy(), c_star=c_k.copy(), converged=False,
+                      decision=Decision.WATCHED.describe("change detected" if why else ""), notes=notes,
+                      trust_radius=self._relative_radius().copy(), trust_radius_next=self._relative_radius().copy(),
+                      solve_time=time.perf_counter() - t0, experiment_ids=[q.request_id for q, _ in ordered])
+        self.history.iterations.append(rec)
+        self._k, self._c = k + 1, c_k.copy()
         self._plan()
         return rec
 

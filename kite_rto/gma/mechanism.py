@@ -15,6 +15,11 @@ may replace parts of the open :class:`Iteration`:
    (safe step); the smallest fraction is taken.
 7. ``adapt``: after the decision (``it.decision``, ``it.step``); a hook learns from it (trust region).
 
+Between iterations, ``perturb()`` decides whether the next iteration learns (nominal point and perturbations) or
+flies its nominal point alone, which ``watch(nominal)`` then tests (:class:`~kite_rto.gma.Settle`); a watched
+iteration calls none of the hooks above, and the iterations before the last watch are not in ``it.history`` (a
+change ended it: what was learned before describes another plant).
+
 ``shrink(where)`` is the one event between mechanisms: the plant disagreed with the model in the setpoints
 ``where`` (a failed solve, an undone step); the trust region narrows there. ``resume(history)`` restores a
 mechanism's state from stored records, so a resumed run decides as the uninterrupted one.
@@ -146,3 +151,13 @@ class Mechanism:
 
     def shrink(self, where) -> None:
         """The plant disagreed with the model in the setpoints ``where`` (a bool or a mask (n_c,))."""
+
+    def perturb(self) -> bool | None:
+        """False: the next iteration flies its nominal point alone and is watched (:meth:`watch`) instead of
+        learning; ``None``: no opinion."""
+        return None
+
+    def watch(self, nominal: PlantPoint) -> str:
+        """A watched iteration's nominal measurement; returns ``""`` to keep watching, else why learning starts
+        again. Called only on a mechanism whose :meth:`perturb` said False."""
+        return ""

@@ -82,6 +82,9 @@ class Decision(StrEnum):
     """Stayed: the plant-gradient estimate is not finite or has quality 0."""
     HOLD_SOLVE_FAILED = "hold: the modified problem failed"
     """Stayed and shrank the trust region: the modified problem has no solution."""
+    WATCHED = "watched"
+    """Stayed without learning: a settled point flown alone and its measurements tested for a change
+    (:class:`~kite_rto.gma.Settle`); with a detail when a change ends the watch."""
 
     @property
     def moved(self) -> bool:

@@ -19,6 +19,7 @@ from .model_secant import ModelSecant
 from .modifier_filter import ModifierFilter, NoiseFilter, build_filters
 from .plain import from_plain, to_plain
 from .safe_step import SafeStep
+from .settle import Settle
 from .trust_region import TrustRegion
 from .undo import Undo
 
@@ -62,7 +63,8 @@ class ModelSettings:
 
 
 MECHANISMS = {"modifier_filter": ModifierFilter, "noise_filter": NoiseFilter, "trust_region": TrustRegion,
-              "safe_step": SafeStep, "undo": Undo, "bound_hold": BoundHold, "model_secant": ModelSecant}
+              "safe_step": SafeStep, "undo": Undo, "bound_hold": BoundHold, "model_secant": ModelSecant,
+              "settle": Settle}
 """The mechanisms' field names in :class:`GMASettings` and their settings classes, in the order GMA calls them."""
 
 
@@ -90,6 +92,7 @@ class GMASettings:
         bound_hold: :class:`~kite_rto.gma.BoundHold`, a setpoint leaves a bound it reached only on evidence.
         model_secant: :class:`~kite_rto.gma.ModelSecant`, the constraints' gradient modifiers from the model's
             own secants over the flown points.
+        settle: :class:`~kite_rto.gma.Settle`, no perturbation at a settled point until a change is detected.
     """
 
     filter_gain: Scalar = 0.5
@@ -104,6 +107,7 @@ class GMASettings:
     undo: Undo | None = None
     bound_hold: BoundHold | None = None
     model_secant: ModelSecant | None = None
+    settle: Settle | None = None
 
     def __post_init__(self):
         n = type(self).__name__
