@@ -31,6 +31,8 @@ class Manifest:
         code_version: the client's code version (every planned run is computed with it).
         libraries: name -> version of the client's numerical libraries.
         failed: ``(scenario, seed, method, error)`` of each planned run that failed, in table order.
+        flight: a campaign of fixed flights: their length, s (None: the time-to-99 % campaign; a manifest without
+            the field is one).
     """
 
     scenarios: tuple
@@ -41,6 +43,7 @@ class Manifest:
     code_version: str
     libraries: dict
     failed: tuple = ()
+    flight: float | None = None
 
     def runs(self) -> list:
         """The planned ``(scenario, seed, method)`` in table order."""
@@ -57,6 +60,8 @@ def write_manifest(path, manifest: Manifest) -> None:
     """Write ``manifest`` as JSON to ``path``."""
     d = {"format": _FORMAT, **asdict(manifest)}
     d["failed"] = [{"scenario": sc, "seed": seed, "method": m, "error": e} for sc, seed, m, e in manifest.failed]
+    if manifest.flight is None:
+        del d["flight"]                              # the manifest of a time-to-99 % campaign, as it always was
     Path(path).write_text(json.dumps(d, indent=1, allow_nan=False) + "\n")
 
 
@@ -78,6 +83,8 @@ _CHECKS = {
     "code_version": (lambda v: isinstance(v, str) and v != "", "a code version"),
     "libraries": (lambda v: isinstance(v, dict) and all(isinstance(x, str) for x in v.values()),
                   "an object of library names and versions"),
+    "flight": (lambda v: v is None or (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                                       and v > 0), "a flight time > 0 s or null"),
     "failed": (lambda v: isinstance(v, list) and all(
         isinstance(f, dict) and set(f) == {"scenario", "seed", "method", "error"} and isinstance(f["seed"], int)
         and all(isinstance(f[k], str) for k in ("scenario", "method", "error")) for f in v),
@@ -95,6 +102,7 @@ def read_manifest(path) -> Manifest:
     if not isinstance(d, dict) or d.get("format") != _FORMAT:
         raise ValueError(f"{path}: format {d.get('format') if isinstance(d, dict) else d!r}: expected {_FORMAT!r}")
     names = [f.name for f in fields(Manifest)]
+    d.setdefault("flight", None)                     # written before fixed flights existed
     if sorted(d) != sorted(names + ["format"]):
         raise ValueError(f"{path}: fields {sorted(d)}: expected {sorted(names + ['format'])}")
     for name, (ok, what) in _CHECKS.items():
@@ -103,7 +111,8 @@ def read_manifest(path) -> Manifest:
     m = Manifest(scenarios=tuple(d["scenarios"]), seeds=tuple(d["seeds"]), methods=tuple(d["methods"]),
                  n_iter=d["n_iter"], budget=float(d["budget"]), code_version=d["code_version"],
                  libraries=d["libraries"],
-                 failed=tuple((f["scenario"], f["seed"], f["method"], f["error"]) for f in d["failed"]))
+                 failed=tuple((f["scenario"], f["seed"], f["method"], f["error"]) for f in d["failed"]),
+                 flight=d["flight"])
     planned = set(m.runs())
     for sc, seed, method, _ in m.failed:
         if (sc, seed, method) not in planned:
@@ -121,6 +130,7 @@ class Plan:
         failed: ``(scenario, seed, method)`` -> error of the runs that failed.
         n_iter, budget: GMA iterations and the baselines' budget factor (the same in every table).
         versions: code version -> its library versions, of every manifest.
+        flight: fixed flights' length, s (the same in every table), or None.
     """
 
     runs: tuple
@@ -128,6 +138,7 @@ class Plan:
     n_iter: int
     budget: float
     versions: dict
+    flight: float | None = None
 
     def check(self, rows, where: str = "the table") -> None:
         """Raise ValueError naming the first row of ``rows`` (:class:`~kite_rto.campaign.results.RunResult`)
@@ -149,10 +160,10 @@ def plan_of(manifests) -> Plan:
     manifests = list(manifests)
     if not manifests:
         raise ValueError("plan_of: no manifest: expected at least one")
-    for name in ("n_iter", "budget"):
-        values = sorted({getattr(m, name) for m in manifests})
+    for name in ("n_iter", "budget", "flight"):
+        values = sorted({getattr(m, name) for m in manifests}, key=lambda v: (v is not None, v or 0))
         if len(values) > 1:
-            raise ValueError(f"the tables were planned with {name} {', '.join(f'{v:g}' for v in values)}: expected "
+            raise ValueError(f"the tables were planned with {name} {', '.join('none' if v is None else f'{v:g}' for v in values)}: expected "
                              "one value in all of them")
     runs, failed = {}, {}
     for m in manifests:
@@ -163,4 +174,4 @@ def plan_of(manifests) -> Plan:
                                  "manifests: expected each run in one table only")
             failed[(sc, seed, method)] = error
     return Plan(runs=tuple(runs), failed=failed, n_iter=manifests[0].n_iter, budget=manifests[0].budget,
-                versions={m.code_version: m.libraries for m in manifests})
+                versions={m.code_version: m.libraries for m in manifests}, flight=manifests[0].flight)

@@ -12,8 +12,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..flight.shape import setpoints_from_shape
 from ..rto.baselines import bayes_opt_plant, finite_difference_ascent, model_only, nelder_mead_plant
 from ..rto.builder import model_only_optimum
+from ..rto.flight_yield import Segment, segments_of_history
 from ..rto.runner import run_rto
 from ..rto.settings import KiteRTOSettings
 from .scenarios import Scenario
@@ -25,6 +27,8 @@ GMA = "gma"
 BASELINES = ("model-only", "nelder-mead", "fd-ascent", "bayes-opt")
 """The baselines: the model optimum held, and the model-free Nelder–Mead, FD ascent and Bayesian optimization."""
 METHODS = (GMA,) + BASELINES
+_UNBOUNDED = 10**9
+"""GMA's iterations in a flight of fixed length: as many as it holds."""
 
 
 @dataclass(frozen=True)
@@ -38,6 +42,8 @@ class Flown:
         experiments: experiments flown.
         crashes: plant crashes during the flight.
         message: why the run stopped early ("" if it did not).
+        segments: what was flown when: :class:`~kite_rto.rto.flight_yield.Segment` s (setpoints rad), one per
+            finished experiment, for the yield of the flight.
     """
 
     iterates: np.ndarray
@@ -46,6 +52,7 @@ class Flown:
     experiments: int
     crashes: int
     message: str = ""
+    segments: tuple = ()
 
 
 def scenario_settings(settings: KiteRTOSettings, scenario: Scenario) -> KiteRTOSettings:
@@ -61,11 +68,17 @@ def start_point(settings: KiteRTOSettings) -> np.ndarray:
     return model_only_optimum(settings).c
 
 
-def fly_gma(scenario: Scenario, seed: int, n_iter: int, settings: KiteRTOSettings) -> Flown:
-    """GMA (``settings`` with the scenario's h_min) for ``n_iter`` iterations on the scenario's plant."""
-    res = run_rto(scenario.plant, seed, n_iter, scenario_settings(settings, scenario))
+def fly_gma(scenario: Scenario, seed: int, n_iter: int, settings: KiteRTOSettings,
+            flight: float | None = None) -> Flown:
+    """GMA (``settings`` with the scenario's h_min) for ``n_iter`` iterations on the scenario's plant, or, with
+    ``flight`` (s), for as many iterations as that flight time holds."""
+    if flight is None:
+        res = run_rto(scenario.plant, seed, n_iter, scenario_settings(settings, scenario))
+    else:
+        res = run_rto(scenario.plant, seed, _UNBOUNDED, scenario_settings(settings, scenario), max_flight_time=flight)
     return Flown(iterates=res.iterates, times=res.iterate_times, flight_time=res.flight_time,
-                 experiments=len(res.experiments), crashes=res.crashes, message=res.message)
+                 experiments=len(res.experiments), crashes=res.crashes, message=res.message,
+                 segments=tuple(segments_of_history(res.history, setpoints_from_shape)))
 
 
 def fly_baseline(method: str, scenario: Scenario, seed: int, settings: KiteRTOSettings, budget: float,
@@ -86,4 +99,5 @@ def fly_baseline(method: str, scenario: Scenario, seed: int, settings: KiteRTOSe
     else:
         raise ValueError(f"baseline {method!r}: expected one of {', '.join(BASELINES)}")
     return Flown(iterates=np.array(run.candidates), times=np.array(run.times), flight_time=float(run.flight_time),
-                 experiments=run.experiments, crashes=run.crashes)
+                 experiments=run.experiments, crashes=run.crashes,
+                 segments=tuple(Segment(t0, t1, tuple(map(float, c)), "") for t0, t1, c in run.flown))

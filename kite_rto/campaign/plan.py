@@ -44,6 +44,9 @@ class Campaign:
         n_iter: GMA iterations (>= 1).
         budget: a baseline's flight time over the reference GMA's time to 99 % on the same scenario and seed (> 0).
         code: the code-version tag (default: :func:`~kite_rto.campaign.version.code_version`).
+        flight: fixed flights: every method flies this long (s, > 0) and is judged by the yield of the flight (GMA
+            iterates as long as it holds, ``n_iter`` and ``budget`` are unused, a baseline flies it all); None: the
+            time-to-99 % campaign.
     """
 
     scenarios: tuple
@@ -53,6 +56,7 @@ class Campaign:
     n_iter: int = 10
     budget: float = 4.0
     code: str = field(default_factory=code_version)
+    flight: float | None = None
 
     def __post_init__(self):
         n = type(self).__name__
@@ -75,6 +79,8 @@ class Campaign:
             raise ValueError(f"{n}.n_iter = {self.n_iter!r}: expected an integer >= 1")
         if not self.budget > 0:
             raise ValueError(f"{n}.budget = {self.budget!r}: expected > 0")
+        if self.flight is not None and not (isinstance(self.flight, (int, float)) and 0 < self.flight < float("inf")):
+            raise ValueError(f"{n}.flight = {self.flight!r}: expected a flight time > 0 s or None")
         if len({s.name for s in self.scenarios}) != len(self.scenarios) or len(set(self.seeds)) != len(self.seeds):
             raise ValueError(f"{n}: scenarios and seeds must not repeat")
 
@@ -86,7 +92,11 @@ class Campaign:
 
     def _gma_spec(self, scenario, seed, name) -> RunSpec:
         settings = scenario_settings(dict(self.variants)[name], scenario)
-        return RunSpec(scenario, int(seed), name, settings, self.n_iter, self.budget, self.code)
+        return RunSpec(scenario, int(seed), name, settings, self.n_iter, self.budget, self.code, self.flight)
+
+    def _flight_key(self) -> tuple:
+        """What a fixed flight adds to a run's key (nothing without one: the keys of earlier campaigns stand)."""
+        return () if self.flight is None else ("flight", float(self.flight))
 
     def tasks(self) -> list:
         """The executor's :class:`~kite_rto.campaign.executor.Task` s, dependencies first."""
@@ -99,19 +109,26 @@ class Campaign:
                 gma_keys = {}
                 run_gma = GMA in self.methods
                 for name, _ in self.variants:
-                    if not run_gma and name != GMA:
-                        continue
+                    if not run_gma and (name != GMA or self.flight is not None):     # the reference only for
+                        continue                                                      # the baselines' budget
                     spec = self._gma_spec(sc, seed, name)
                     key = f"{name}-{sc.name}-s{seed}-" + _digest(sc.name, sc.plant, sc.h_min, spec.seed, name,
-                                                                 repr(spec.settings), spec.n_iter, self.code)
+                                                                 repr(spec.settings), spec.n_iter, self.code,
+                                                                 *self._flight_key())
                     gma_keys[name] = key
                     out.append(Task(key, gma_task, (spec,), deps=(ok,)))
                 for method in (m for m in BASELINES if m in self.methods):
                     spec = replace(self._gma_spec(sc, seed, GMA), method=method)
-                    key = f"{method}-{sc.name}-s{seed}-" + _digest(sc.name, sc.plant, sc.h_min, spec.seed, method,
-                                                                   repr(spec.settings), spec.n_iter, self.budget,
-                                                                   gma_keys[GMA], self.code)
-                    out.append(Task(key, baseline_task, (spec,), deps=(ok, gma_keys[GMA])))
+                    if self.flight is None:
+                        key = f"{method}-{sc.name}-s{seed}-" + _digest(sc.name, sc.plant, sc.h_min, spec.seed,
+                                                                       method, repr(spec.settings), spec.n_iter,
+                                                                       self.budget, gma_keys[GMA], self.code)
+                        out.append(Task(key, baseline_task, (spec,), deps=(ok, gma_keys[GMA])))
+                    else:                        # a fixed flight: no reference run, no budget
+                        key = f"{method}-{sc.name}-s{seed}-" + _digest(sc.name, sc.plant, sc.h_min, spec.seed,
+                                                                       method, repr(spec.settings), self.code,
+                                                                       *self._flight_key())
+                        out.append(Task(key, baseline_task, (spec,), deps=(ok,)))
         return out
 
 
@@ -152,4 +169,5 @@ def campaign_manifest(campaign: Campaign, run: CampaignRun, libraries: dict) -> 
     ``libraries`` (name -> version)."""
     return Manifest(scenarios=tuple(s.name for s in campaign.scenarios), seeds=tuple(int(s) for s in campaign.seeds),
                     methods=campaign.table_methods(), n_iter=campaign.n_iter, budget=float(campaign.budget),
-                    code_version=campaign.code, libraries=dict(libraries), failed=run.failed_runs)
+                    code_version=campaign.code, libraries=dict(libraries), failed=run.failed_runs,
+                    flight=None if campaign.flight is None else float(campaign.flight))

@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass, fields
 
 from ..rto.judge import Verdict
 
-__all__ = ["RunResult", "TABLE_COLUMNS", "write_table", "write_wall_times"]
+__all__ = ["RunResult", "TABLE_COLUMNS", "OPTIONAL_COLUMNS", "write_table", "write_wall_times"]
 
 
 def _r(v, digits: int):
@@ -46,6 +46,9 @@ class RunResult:
         message: why the run stopped early ("" if it did not).
         code_version: the :func:`~kite_rto.campaign.version.code_version` the run was computed with.
         wall_s: wall time of the run on its worker, s (not in the table).
+        yield_percent: a campaign of fixed flights: the yield of the whole flight
+            (:mod:`~kite_rto.rto.flight_yield`), % of the oracle's energy; None otherwise.
+        below_floor_s: the same: flight time on setpoints judged below h_min - 2 m, s; None otherwise.
     """
 
     scenario: str
@@ -70,12 +73,15 @@ class RunResult:
     message: str
     code_version: str
     wall_s: float
+    yield_percent: float | None = None
+    below_floor_s: float | None = None
 
     @classmethod
     def judged(cls, scenario, seed: int, method: str, flown, verdict: Verdict, oracle_kn: float,
-               budget_s: float | None, code: str, wall_s: float) -> "RunResult":
+               budget_s: float | None, code: str, wall_s: float, flight=None) -> "RunResult":
         """The result of ``flown`` (:class:`~kite_rto.campaign.methods.Flown`) on ``scenario`` given its
-        :class:`Verdict`, computed with code version ``code``."""
+        :class:`Verdict`, computed with code version ``code``; ``flight``: its
+        :class:`~kite_rto.rto.flight_yield.FlightYield` (a campaign of fixed flights) or None."""
         return cls(scenario=scenario.name, tuning=scenario.tuning, h_min=float(scenario.h_min), seed=int(seed),
                    method=method, reach_index=verdict.reach_index,
                    t99_s=_r(verdict.reach_time, 2), held_from=verdict.held_from,
@@ -85,7 +91,9 @@ class RunResult:
                    below_floor=int(verdict.below_floor), flight_time_s=_r(flown.flight_time, 2),
                    experiments=int(flown.experiments), crashes=int(flown.crashes),
                    budget_s=_r(budget_s, 2), oracle_kn=_r(oracle_kn, 3),
-                   message=flown.message, code_version=code, wall_s=round(float(wall_s), 2))
+                   message=flown.message, code_version=code, wall_s=round(float(wall_s), 2),
+                   yield_percent=None if flight is None else _r(flight.percent, 3),
+                   below_floor_s=None if flight is None else _r(flight.below_floor_s, 2))
 
     def to_dict(self) -> dict:
         """Plain JSON-serializable values (tuples as lists)."""
@@ -94,11 +102,14 @@ class RunResult:
     @classmethod
     def from_dict(cls, d: dict) -> "RunResult":
         names = {f.name for f in fields(cls)}
+        d = {**{k: None for k in OPTIONAL_COLUMNS}, **d}
         if set(d) != names:
             raise ValueError(f"RunResult.from_dict: fields {sorted(set(d) ^ names)} differ from {sorted(names)}")
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
+OPTIONAL_COLUMNS = ("yield_percent", "below_floor_s")
+"""Columns a table of a campaign without fixed flights may lack (they are None there)."""
 TABLE_COLUMNS = tuple(f.name for f in fields(RunResult) if f.name != "wall_s")
 """The results table's columns, in order (every :class:`RunResult` field but ``wall_s``)."""
 
@@ -112,12 +123,16 @@ def _cell(v) -> str:
 
 
 def write_table(path, results) -> None:
-    """Write ``results`` (:class:`RunResult`, already in campaign order) as CSV with :data:`TABLE_COLUMNS`."""
+    """Write ``results`` (:class:`RunResult`, already in campaign order) as CSV with :data:`TABLE_COLUMNS` (without
+    :data:`OPTIONAL_COLUMNS` when no result has them: a campaign without fixed flights writes the table it always
+    wrote)."""
+    yields = any(getattr(r, c) is not None for r in results for c in OPTIONAL_COLUMNS)
+    columns = TABLE_COLUMNS if yields else tuple(c for c in TABLE_COLUMNS if c not in OPTIONAL_COLUMNS)
     with open(path, "w", newline="") as f:
         w = csv.writer(f, lineterminator="\n")
-        w.writerow(TABLE_COLUMNS)
+        w.writerow(columns)
         for r in results:
-            w.writerow([_cell(getattr(r, c)) for c in TABLE_COLUMNS])
+            w.writerow([_cell(getattr(r, c)) for c in columns])
 
 
 def write_wall_times(path, results) -> None:

@@ -4,7 +4,8 @@ run failed, is missing, or rows of several code versions are mixed) it says so, 
 scenario and names them, and no criterion is marked met or not met. Then per scenario and GMA variant, per seed (a
 seed is the same turbulence box in every scenario with the same Mann length scale and anisotropy, so outcomes
 correlate by seed), then the campaign's criteria over all runs and over the tuning and report subsets, then
-the baselines' time to 99 % over GMA's, and last the environment: the plan, the code versions with their rows and
+the baselines' time to 99 % over GMA's (a campaign of fixed flights: the yield of the whole flight per scenario and
+method, and its criteria, instead), and last the environment: the plan, the code versions with their rows and
 numerical libraries, and each scenario's oracle (its cache is rebuilt per environment, and a criterion decided by a
 run near 99 % can move with it; a scenario whose rows carry more than one oracle value was merged from different
 caches).
@@ -97,6 +98,77 @@ def _criteria(gma_rows, all_rows, budget: float) -> dict:
     }
 
 
+YIELD_CRITERIA = {
+    "median": "GMA's yield: median >= 99.0 % of the oracle's energy",
+    "worst": "GMA's yield: worst run >= 98.0 %",
+    "below": "GMA: no flight time below h_min - 2 m",
+    "loss": "best model-free method's yield loss >= 3x GMA's (median over scenarios)",
+}
+"""The criteria a campaign of fixed flights decides: the energy of the whole flight, learning included."""
+
+
+def _loss_ratio(rows, method: str, ref: str) -> float:
+    """Median over scenarios of ``method``'s median yield loss (100 - yield) over ``ref``'s."""
+    per = []
+    for sc in dict.fromkeys(r.scenario for r in rows):
+        mine = [100.0 - r.yield_percent for r in rows if r.scenario == sc and r.method == method]
+        theirs = [100.0 - r.yield_percent for r in rows if r.scenario == sc and r.method == ref]
+        if mine and theirs:
+            a, b = _median(mine), _median(theirs)
+            per.append(a / b if b > 0 else (1.0 if a <= 0 else math.inf))
+    return _median(per)
+
+
+def _yield_section(rows, complete: bool) -> list:
+    """Per scenario and method: median and worst yield and the longest time below the floor; then the criteria per
+    GMA variant over all, tuning and report scenarios."""
+    rows = [r for r in rows if r.yield_percent is not None]
+    if not rows:
+        return []
+    methods = list(dict.fromkeys(r.method for r in rows))
+    out = ["| scenario | tuning | " + " | ".join(methods) + " |", "|---|---|" + "---|" * len(methods)]
+    for sc in dict.fromkeys(r.scenario for r in rows):
+        cells = []
+        for m in methods:
+            ys = [r.yield_percent for r in rows if r.scenario == sc and r.method == m]
+            below = max((r.below_floor_s or 0.0 for r in rows if r.scenario == sc and r.method == m), default=0.0)
+            cells.append("-" if not ys else f"{_median(ys):.2f} ({min(ys):.2f})" + (f", {below:.0f} s low" if below
+                                                                                     else ""))
+        tuning = next(r.tuning for r in rows if r.scenario == sc)
+        out.append(f"| {sc} | {'yes' if tuning else ''} | " + " | ".join(cells) + " |")
+    out += ["", "Cells: median yield % of the oracle's energy over the seeds (worst); the longest flight time on "
+            "setpoints judged below h_min - 2 m, when any.", ""]
+    subsets = {"all": lambda r: True, "tuning": lambda r: r.tuning, "report": lambda r: not r.tuning}
+    for v in (m for m in methods if m not in BASELINES):
+        out += [f"**{v}**", "", "| criterion | all | tuning | report |", "|---|---|---|---|"]
+        for c, text in YIELD_CRITERIA.items():
+            cells = []
+            for f in subsets.values():
+                mine = [r for r in rows if r.method == v and f(r)]
+                sub = [r for r in rows if f(r)]
+                if not mine:
+                    cells.append("-")
+                    continue
+                ys = [r.yield_percent for r in mine]
+                if c == "median":
+                    cells.append(_verdict(f"{_median(ys):.2f} %", _median(ys) >= 99.0, complete))
+                elif c == "worst":
+                    cells.append(_verdict(f"{min(ys):.2f} %", min(ys) >= 98.0, complete))
+                elif c == "below":
+                    low = sum((r.below_floor_s or 0.0) > 0 for r in mine)
+                    cells.append(_verdict(f"{low}/{len(mine)} runs", low == 0, complete))
+                else:
+                    ratios = {m: _loss_ratio(sub, m, v) for m in MODEL_FREE if any(r.method == m for r in sub)}
+                    if not ratios:
+                        cells.append("no model-free method")
+                        continue
+                    best = min(ratios, key=ratios.get)
+                    cells.append(_verdict(f"{best} {ratios[best]:.1f}x", ratios[best] >= 3.0, complete))
+            out.append(f"| {text} | " + " | ".join(cells) + " |")
+        out.append("")
+    return out
+
+
 def _verdict(value: str, met, complete: bool) -> str:
     if met is None:
         return value
@@ -177,7 +249,8 @@ def _versions(rows, plan: Plan) -> dict:
 
 
 def _environment(rows, plan: Plan, versions: dict) -> list:
-    lines = [f"- plan: {plan.n_iter} GMA iterations, the baselines' budget {plan.budget:g}x GMA's time to 99 %"]
+    lines = [f"- plan: {plan.n_iter} GMA iterations, the baselines' budget {plan.budget:g}x GMA's time to 99 %"
+             if plan.flight is None else f"- plan: fixed flights of {plan.flight:g} s for every method"]
     for v, n in versions.items():
         libraries = plan.versions.get(v)
         lines.append(f"- code version {v}: {n} runs; " + (", ".join(f"{k} {x}" for k, x in libraries.items())
@@ -252,13 +325,16 @@ def summarize(rows, plan: Plan) -> str:
         out += [f"## {v}: criteria", "", "| criterion | all | tuning | report |",
                 "|---|---|---|---|"]
         for c, text in CRITERIA.items():
-            if c == "baseline" and v != GMA:
+            if c == "baseline" and (v != GMA or plan.flight is not None):
                 continue
             cells = [_verdict(*cols[k][c], complete) if any(r.method == v and f(r) for r in rows) else "-"
                      for k, f in subsets.items()]
             out.append(f"| {text} | " + " | ".join(cells) + " |")
         out.append("")
-    base = _baseline_table(rows, budget)
+    if plan.flight is not None:
+        out += [f"## Yield of the whole flight ({plan.flight:g} s each, learning included)", ""]
+        out += _yield_section(rows, complete)
+    base = _baseline_table(rows, budget) if plan.flight is None else []
     if base:
         out += [f"## Baselines: time to 99 % over GMA's (budget {budget:g}x GMA's)", ""] + base + [""]
     extra = [v for v in variants if v != GMA]

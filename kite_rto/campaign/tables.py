@@ -11,12 +11,13 @@ import csv
 import json
 import math
 
-from .results import TABLE_COLUMNS, RunResult
+from .results import OPTIONAL_COLUMNS, TABLE_COLUMNS, RunResult
 
 __all__ = ["read_table"]
 
 _INTS = ("seed", "reach_index", "held_from", "below_floor", "experiments", "crashes")
-_FLOATS = ("h_min", "t99_s", "final_percent", "lowest_altitude", "flight_time_s", "budget_s", "oracle_kn")
+_FLOATS = ("h_min", "t99_s", "final_percent", "lowest_altitude", "flight_time_s", "budget_s", "oracle_kn",
+           "yield_percent", "below_floor_s")
 
 
 def _parse(name: str, text: str):
@@ -46,15 +47,17 @@ def read_table(path) -> list:
     not parse, or the columns when they are not :data:`~kite_rto.campaign.results.TABLE_COLUMNS`."""
     with open(path, newline="") as f:
         reader = csv.DictReader(f)
-        if tuple(reader.fieldnames or ()) != TABLE_COLUMNS:
+        columns = tuple(reader.fieldnames or ())
+        older = tuple(c for c in TABLE_COLUMNS if c not in OPTIONAL_COLUMNS)      # a table without fixed flights
+        if columns not in (TABLE_COLUMNS, older):
             hint = ("; without code_version it cannot name the code its runs were computed with: run its campaign "
-                    "again" if set(TABLE_COLUMNS) - set(reader.fieldnames or ()) == {"code_version"} else "")
+                    "again" if set(older) - set(columns) == {"code_version"} else "")
             raise ValueError(f"{path}: columns {reader.fieldnames} differ from a campaign table's "
                              f"{list(TABLE_COLUMNS)}{hint}")
         rows = []
         for line, cells in enumerate(reader, start=2):
             values = {}
-            for name in TABLE_COLUMNS:
+            for name in columns:
                 try:
                     values[name] = _parse(name, cells[name])
                 except (ValueError, TypeError) as e:

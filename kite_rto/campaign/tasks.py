@@ -3,7 +3,8 @@ baseline run (:func:`baseline_task`), each from a picklable :class:`RunSpec`, an
 
 Every task first checks that the worker runs the client's code version. A baseline's flight-time budget is
 ``spec.budget`` times the flight time at which the reference GMA run on the same scenario and seed reached 99 % of
-the oracle (its whole flight time if it did not), and it stops once a candidate reaches 99 %.
+the oracle (its whole flight time if it did not), and it stops once a candidate reaches 99 %. In a campaign of
+fixed flights (``RunSpec.flight``) every method flies that long and its result carries the yield of the flight.
 """
 from __future__ import annotations
 
@@ -12,8 +13,9 @@ from dataclasses import dataclass
 from functools import partial
 
 from ..flight.shape import ShapeBox
-from ..rto.judge import judge, reaches
-from ..rto.oracle import find_oracle
+from ..rto.flight_yield import flight_yield
+from ..rto.judge import altitude_floor, judge, reaches
+from ..rto.oracle import find_oracle, plant_performance
 from ..rto.settings import KiteRTOSettings
 from .methods import fly_baseline, fly_gma
 from .results import RunResult
@@ -35,6 +37,8 @@ class RunSpec:
         n_iter: GMA iterations.
         budget: a baseline's flight time over the reference GMA's time to 99 % (> 0).
         code: the client's :func:`~kite_rto.campaign.version.code_version`.
+        flight: a campaign of fixed flights: every method flies this long (s; GMA as many iterations as it holds,
+            a baseline without stopping early) and is judged by its yield; None: the time-to-99 % campaign.
     """
 
     scenario: Scenario
@@ -44,6 +48,7 @@ class RunSpec:
     n_iter: int
     budget: float
     code: str
+    flight: float | None = None
 
 
 def oracle_task(scenario: Scenario, box: ShapeBox, code: str) -> dict:
@@ -60,10 +65,20 @@ def gma_task(spec: RunSpec, oracle: dict) -> dict:
     """GMA on the scenario, judged: a :class:`RunResult` as a dict."""
     check_code_version(spec.code)
     t0 = time.perf_counter()
-    flown = fly_gma(spec.scenario, spec.seed, spec.n_iter, spec.settings)
+    flown = fly_gma(spec.scenario, spec.seed, spec.n_iter, spec.settings, spec.flight)
     verdict = judge(spec.scenario.plant, spec.scenario.h_min, oracle["tension_kn"], flown.iterates, flown.times)
     return RunResult.judged(spec.scenario, spec.seed, spec.method, flown, verdict, oracle["tension_kn"], None,
-                            spec.code, time.perf_counter() - t0).to_dict()
+                            spec.code, time.perf_counter() - t0, _yield(spec, oracle, flown)).to_dict()
+
+
+def _yield(spec: RunSpec, oracle: dict, flown):
+    """The flight's :class:`~kite_rto.rto.flight_yield.FlightYield` on the scenario's deterministic plant in its
+    (stationary) wind, for a campaign of fixed flights; None otherwise."""
+    if spec.flight is None:
+        return None
+    sc = spec.scenario
+    return flight_yield(flown.segments, lambda c, t: plant_performance(sc.plant, c), lambda t: oracle["tension_kn"],
+                        altitude_floor(sc.h_min))
 
 
 def baseline_budget(budget: float, gma_row: dict) -> float:
@@ -72,14 +87,17 @@ def baseline_budget(budget: float, gma_row: dict) -> float:
     return budget * t_ref
 
 
-def baseline_task(spec: RunSpec, oracle: dict, gma_row: dict) -> dict:
-    """Baseline ``spec.method`` on the scenario with the budget from the reference GMA run ``gma_row``, judged:
-    a :class:`RunResult` as a dict."""
+def baseline_task(spec: RunSpec, oracle: dict, gma_row: dict | None = None) -> dict:
+    """Baseline ``spec.method`` on the scenario with the budget from the reference GMA run ``gma_row`` (a fixed
+    flight: ``spec.flight``, no reference), judged: a :class:`RunResult` as a dict."""
     check_code_version(spec.code)
     t0 = time.perf_counter()
-    budget_s = baseline_budget(spec.budget, gma_row)
-    stop = partial(reaches, spec.scenario.plant, spec.scenario.h_min, oracle["tension_kn"])
+    if spec.flight is None:
+        budget_s = baseline_budget(spec.budget, gma_row)
+        stop = partial(reaches, spec.scenario.plant, spec.scenario.h_min, oracle["tension_kn"])
+    else:                                     # a fixed flight: the whole of it, as an operator would fly it
+        budget_s, stop = spec.flight, None
     flown = fly_baseline(spec.method, spec.scenario, spec.seed, spec.settings, budget_s, stop)
     verdict = judge(spec.scenario.plant, spec.scenario.h_min, oracle["tension_kn"], flown.iterates, flown.times)
     return RunResult.judged(spec.scenario, spec.seed, spec.method, flown, verdict, oracle["tension_kn"], budget_s,
-                            spec.code, time.perf_counter() - t0).to_dict()
+                            spec.code, time.perf_counter() - t0, _yield(spec, oracle, flown)).to_dict()

@@ -35,7 +35,8 @@ class BaselineRun:
 
     ``stop``: optional ``callable(c) -> bool`` judging each new candidate; once it returns True the run ends
     early (``stopped``), e.g. when a candidate reaches the target on the deterministic plant. ``crashes``: plant
-    crashes during the run's flight.
+    crashes during the run's flight. ``flown``: ``(t_start, t_end, c)`` (s, s, rad) of every finished experiment,
+    in order (the model-only run: its point over the whole budget).
     """
 
     name: str
@@ -46,6 +47,7 @@ class BaselineRun:
     crashes: int = 0
     stop: object = None
     stopped: bool = False
+    flown: list = field(default_factory=list)
 
     def add(self, c, t) -> None:
         self.candidates.append(np.asarray(c, dtype=float).copy())
@@ -59,6 +61,7 @@ def model_only(c0, budget: float) -> BaselineRun:
     run = BaselineRun("model-only")
     run.add(c0, 0.0)
     run.flight_time = budget
+    run.flown = [(0.0, float(budget), np.asarray(c0, dtype=float).copy())]
     return run
 
 
@@ -68,6 +71,9 @@ def _flight(config, seed, spec, c0):
 
 def _finish(run: BaselineRun, fl: PlantFlight) -> BaselineRun:
     run.flight_time, run.experiments = fl.t, len(fl.experiments)
+    starts = [e.t_start for e in fl.experiments[:1]] + [e.t_end for e in fl.experiments[:-1]]   # contiguous: a
+    run.flown = [(t0, e.t_end, np.asarray(e.c, dtype=float).copy())                       # repeated attempt
+                 for t0, e in zip(starts, fl.experiments)]                                 # flew the same c
     run.crashes = 0 if fl.plant is None else fl.plant.crashes
     return run
 

@@ -46,6 +46,9 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--iters", type=int, default=10, help="GMA iterations")
     ap.add_argument("--budget", type=float, default=4.0,
                     help="a baseline's flight time over GMA's time to 99 %% on the same scenario and seed")
+    ap.add_argument("--flight", type=float, default=None, metavar="SECONDS",
+                    help="fixed flights: every method flies this long and is judged by the yield of the whole flight "
+                         "(GMA iterates as long as it holds; --iters and --budget unused)")
     ap.add_argument("--variant", action="append", default=[], metavar="NAME=FIELD=VALUE[,FIELD=VALUE]",
                     help="a GMA variant: KiteRTOSettings fields changed from the defaults, e.g. "
                          "undo2=gma.undo.sigma=2.0 (repeatable; NAME gma changes the reference)")
@@ -73,7 +76,7 @@ def build_campaign(args) -> Campaign:
         raise ValueError(f"--seeds {args.seeds} --first-seed {args.first_seed}: expected >= 1 and >= 0")
     return Campaign(scenarios=tuple(select_scenarios(args.scenarios)),
                     seeds=tuple(range(args.first_seed, args.first_seed + args.seeds)), methods=methods,
-                    variants=tuple(variants.items()), n_iter=args.iters, budget=args.budget)
+                    variants=tuple(variants.items()), n_iter=args.iters, budget=args.budget, flight=args.flight)
 
 
 def write_outputs(out: Path, campaign: Campaign, result: CampaignRun) -> str:
@@ -118,8 +121,9 @@ def main(argv=None) -> int:
     runs = sum(t.store for t in to_run)
     variants = ", ".join(name for name, _ in campaign.variants)
     print(f"kite_campaign: {len(campaign.scenarios)} scenarios x {len(campaign.seeds)} seeds, methods "
-          f"{', '.join(campaign.methods)} (GMA variants: {variants}), {campaign.n_iter} iterations, baseline budget "
-          f"{campaign.budget:g}x; code {campaign.code}; cache {cache.directory}: {len(cached)} runs cached, "
+          f"{', '.join(campaign.methods)} (GMA variants: {variants}), "
+          + (f"{campaign.n_iter} iterations, baseline budget {campaign.budget:g}x" if campaign.flight is None else
+             f"fixed flights of {campaign.flight:g} s") + f"; code {campaign.code}; cache {cache.directory}: {len(cached)} runs cached, "
           f"{runs} to run", flush=True)
     if args.dry_run:
         for t in to_run:

@@ -9,7 +9,7 @@ from dataclasses import replace
 import pytest
 
 from kite_rto.campaign.plan import Campaign
-from kite_rto.campaign.results import TABLE_COLUMNS, RunResult, write_table
+from kite_rto.campaign.results import OPTIONAL_COLUMNS, TABLE_COLUMNS, RunResult, write_table
 from kite_rto.campaign.tables import read_table
 from kite_rto.campaign.scenarios import scenario
 from kite_rto.campaign.summary import summarize
@@ -106,7 +106,13 @@ def test_the_table_holds_every_field_but_wall_time_in_campaign_order(tmp_path):
     assert RunResult.from_dict(json.loads(json.dumps(rows[1].to_dict()))) == rows[1]
     write_table(tmp_path / "t.csv", rows)
     table = list(csv.DictReader(open(tmp_path / "t.csv")))
-    assert tuple(table[0]) == TABLE_COLUMNS and "wall_s" not in TABLE_COLUMNS
+    # without fixed flights, the table it always was; with them, the yield columns too
+    assert tuple(table[0]) == tuple(c for c in TABLE_COLUMNS if c not in OPTIONAL_COLUMNS)
+    assert "wall_s" not in TABLE_COLUMNS and TABLE_COLUMNS[-2:] == OPTIONAL_COLUMNS
+    flights = [replace(r, yield_percent=98.5 - i, below_floor_s=0.0) for i, r in enumerate(rows)]
+    write_table(tmp_path / "f.csv", flights)
+    assert tuple(next(csv.reader(open(tmp_path / "f.csv")))) == TABLE_COLUMNS
+    assert [(r.yield_percent, r.below_floor_s) for r in read_table(tmp_path / "f.csv")] == [(98.5, 0.0), (97.5, 0.0)]
     assert [r["method"] for r in table] == ["gma", "model-only"]
     assert json.loads(table[0]["percent"]) == [90.0, 99.5] and table[0]["budget_s"] == ""
     assert json.loads(table[1]["altitude"]) == [None] and table[1]["lowest_altitude"] == ""

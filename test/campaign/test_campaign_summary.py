@@ -13,6 +13,10 @@ import pytest
 from kite_rto.campaign import tasks
 from kite_rto.campaign.manifest import manifest_path, plan_of, read_manifest, write_manifest
 from kite_rto.campaign.methods import Flown
+from kite_rto.campaign.plan import Campaign
+from kite_rto.campaign.scenarios import scenario
+from kite_rto.campaign.tables import read_table
+from kite_rto.rto.flight_yield import Segment
 from kite_rto.campaign.results import write_table
 from kite_rto.campaign.summary import decided, summarize
 from kite_rto.campaign.version import code_version
@@ -163,18 +167,23 @@ def test_campaign_summary_merges_tables_and_refuses_a_run_in_two(tmp_path, capsy
 
 
 def _fake_flight(monkeypatch):
-    """Oracle, flights and the judge's plant closed-form; GMA on high_floor raises."""
-    def fly_gma(scenario, seed, n_iter, settings):
+    """Oracle, flights and the judge's plant closed-form; GMA on high_floor raises. GMA flies 0.5 for 400 s, then
+    0.6 (600 kN, the oracle) to the end of its flight (800 s, or the fixed flight); a baseline flies 0.5 (500 kN)."""
+    def fly_gma(scenario, seed, n_iter, settings, flight=None):
         if scenario.name == "high_floor":
             raise RuntimeError(f"no lap on {scenario.name}")
+        end = flight or 800.0
         return Flown(iterates=np.array([[0.5, 0.8, 0.5], [0.6, 0.8, 0.5]]), times=np.array([0.0, 400.0]),
-                     flight_time=800.0, experiments=8, crashes=0)
+                     flight_time=end, experiments=8, crashes=0,
+                     segments=(Segment(0.0, 400.0, (0.5, 0.8, 0.5)), Segment(400.0, end, (0.6, 0.8, 0.5))))
     monkeypatch.setattr(tasks, "find_oracle", lambda plant, box, h_min: SimpleNamespace(tension_kn=600.0,
                                                                                         c=[0.6, 0.8, 0.5]))
     monkeypatch.setattr(tasks, "fly_gma", fly_gma)
     monkeypatch.setattr(tasks, "fly_baseline", lambda method, sc, seed, settings, budget, stop: Flown(
-        iterates=np.array([[0.5, 0.8, 0.5]]), times=np.array([0.0]), flight_time=budget, experiments=4, crashes=0))
+        iterates=np.array([[0.5, 0.8, 0.5]]), times=np.array([0.0]), flight_time=budget, experiments=4, crashes=0,
+        segments=(Segment(0.0, budget, (0.5, 0.8, 0.5)),)))
     monkeypatch.setattr(judge, "plant_performance", lambda plant, c: (1000.0 * c[0], 120.0))
+    monkeypatch.setattr(tasks, "plant_performance", lambda plant, c: (1000.0 * c[0], 120.0))
 
 
 @contextmanager
@@ -218,3 +227,29 @@ def test_every_committed_table_gives_its_committed_summary(tmp_path):
         assert manifest_path(table).is_file() and (table.parent / "summary.md").is_file(), table.parent
         assert campaign_summary.main([str(table), "--out", str(tmp_path / "summary.md")]) == 0, table
         assert (tmp_path / "summary.md").read_bytes() == (table.parent / "summary.md").read_bytes(), table
+
+
+def test_a_campaign_of_fixed_flights_judges_every_method_by_its_yield(tmp_path, monkeypatch, capsys):
+    """Every method flies 2000 s: GMA 400 s at 500 kN then 1600 s at the oracle's 600 kN (yield 96.67 %), the
+    baseline 500 kN throughout (83.33 %): its loss is 5x GMA's. The yield columns are in the table, the
+    flight in the manifest, and the summary decides the yield criteria."""
+    _fake_flight(monkeypatch)
+    monkeypatch.setattr(cli, "_client", _in_process_client)
+    out = tmp_path / "out"
+    assert cli.main(["--scenarios", "default", "--seeds", "1", "--methods", "gma,nelder-mead", "--flight",
+                     "2000", "--retries", "0", "--cache-dir", str(tmp_path / "cache"), "--out", str(out)]) == 0
+    assert "fixed flights of 2000 s" in capsys.readouterr().out
+    rows = read_table(out / "results.csv")
+    assert [(r.method, r.yield_percent, r.below_floor_s, r.budget_s) for r in rows] == [
+        ("gma", 96.667, 0.0, None), ("nelder-mead", 83.333, 0.0, 2000.0)]
+    assert read_manifest(manifest_path(out / "results.csv")).flight == 2000.0
+    summary = (out / "summary.md").read_text()
+    assert "## Yield of the whole flight (2000 s each, learning included)" in summary
+    assert "| default | yes | 96.67 (96.67) | 83.33 (83.33) |" in summary
+    assert "| GMA's yield: median >= 99.0 % of the oracle's energy | 96.67 % (NOT met) | 96.67 % (NOT met) | - |" \
+        in summary
+    assert ("| best model-free method's yield loss >= 3x GMA's (median over scenarios) | nelder-mead 5.0x (met) | "
+            "nelder-mead 5.0x (met) | - |") in summary
+    assert "Baselines: time to 99 %" not in summary
+    with pytest.raises(ValueError, match="Campaign.flight = -1: expected a flight time > 0 s or None"):
+        Campaign(scenarios=(scenario("default"),), seeds=(0,), flight=-1)
