@@ -21,9 +21,11 @@ _E = _S.experiment
 
 
 def _mechanism(path: str, description: str, low: float, high: float, unit: str = "") -> ParamSpec:
-    """The parameter ``<mechanism>.<field>`` of one of GMA's mechanisms, defaulting to the kite's value."""
+    """The parameter ``<mechanism>.<field>`` of one of GMA's mechanisms, defaulting to the kite's value (the
+    mechanism's own default where the kite has it off)."""
     name, field = path.split(".")
-    return ParamSpec(path, getattr(getattr(_S.gma, name), field), description, low, high, unit=unit)
+    settings = getattr(_S.gma, name) or MECHANISMS[name]()
+    return ParamSpec(path, getattr(settings, field), description, low, high, unit=unit)
 
 
 _MECHANISM_PARAMS = (
@@ -48,6 +50,14 @@ _MECHANISM_PARAMS = (
     _mechanism("bound_hold.sigma", "a setpoint at a bound an earlier step reached stays there unless the held "
                "problem's multiplier of it exceeds this", 0.0, 100.0, "standard deviations of the cost modifier"),
     _mechanism("bound_hold.after", "first iteration that holds bounds", 0, 1000, "iterations"),
+    _mechanism("settle.step", "a step below this in every setpoint is calm (settle: no perturbation at a settled "
+               "point until a change is detected)", 1e-6, 1.0, "box widths"),
+    _mechanism("settle.after", "calm iterations that settle the point (and watched measurements that make the "
+               "reference)", 1, 100, "iterations"),
+    _mechanism("settle.drift", "allowance k of the CUSUM on the watched measurements", 0.0, 10.0,
+               "standard deviations"),
+    _mechanism("settle.threshold", "decision limit h of the CUSUM: above it a change ends the watch", 0.01, 100.0,
+               "standard deviations"),
 )
 PARAMS = (
     ParamSpec("db", "rto.sqlite", "SQLite file of experiments and iterations (resume source), in an existing "
