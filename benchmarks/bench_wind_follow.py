@@ -17,50 +17,20 @@ table; ``main()`` returns its rows.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 from dataclasses import replace
 
 import numpy as np
 
-from kite_rto.flight.closed_loop import make_closed_loop
-from kite_rto.flight.controller import ControllerSettings
 from kite_rto.flight.wind_follow import WindFollowSettings
 from kite_rto.kite.mean_wind import EDC_DURATION, MeanWindSettings
 from kite_rto.kite.plant import PlantConfig
 from kite_rto.kite.wind_field import WindFieldSettings
+from kite_rto.testing.wind_turn import fly_following
 
 from _table import print_table
 
 BOXES = {"16 km (default)": (2048, 32, 32), "4 km": (512, 32, 32)}
-
-
-class _TrueVane:
-    """The plant with a perfect vane: the true mean wind direction."""
-
-    def __init__(self, plant):
-        self.plant, self.dt = plant, plant.dt
-
-    def _m(self, m):
-        return dataclasses.replace(m, wind_direction=self.plant.wind.mean.direction)
-
-    def measure(self):
-        return self._m(self.plant.measure())
-
-    def step(self, delta):
-        return self._m(self.plant.step(delta))
-
-
-def fly(config, follow, seed, duration, true_vane=False):
-    """``(t, tension, path direction)`` arrays and the plant of one closed loop."""
-    plant, ctl = make_closed_loop(plant_config=config, seed=seed, settings=ControllerSettings(follow_wind=follow))
-    src = _TrueVane(plant) if true_vane else plant
-    m = src.measure()
-    out = []
-    for _ in range(round(duration / plant.dt)):
-        m = src.step(ctl.command(m))
-        out.append((m.t, m.tension, ctl.status.direction))
-    return np.array(out).T, plant
 
 
 def main(argv=None) -> list:
@@ -76,10 +46,12 @@ def main(argv=None) -> list:
         for seed in seeds:
             config = replace(PlantConfig(), wind_field=WindFieldSettings(points=points, components="uvw"),
                              mean_wind=MeanWindSettings(edc_time=args.turn))
-            (t, tension, direction), plant = fly(config, WindFollowSettings(enabled=True), seed, end + args.window)
-            (_, best, _), _ = fly(config, WindFollowSettings(enabled=True, filter_time=1e-9, rate_limit=100.0), seed,
-                                  end + args.window, true_vane=True)
-            (_, fixed, _), _ = fly(config, WindFollowSettings(enabled=False), seed, end + args.window)
+            (t, tension, direction, _), plant = fly_following(config, WindFollowSettings(enabled=True), seed,
+                                                              end + args.window)
+            (_, best, _, _), _ = fly_following(config, WindFollowSettings(enabled=True, filter_time=1e-9,
+                                                                          rate_limit=100.0),
+                                               seed, end + args.window, true_vane=True)
+            (_, fixed, _, _), _ = fly_following(config, WindFollowSettings(enabled=False), seed, end + args.window)
             new = plant.wind.mean.direction
             after = t > end
             close = t[after & (np.abs(direction - new) < math.radians(5.0))]

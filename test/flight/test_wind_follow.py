@@ -2,7 +2,6 @@
 the measurement turned into the path's frame, the controller unchanged when it does not follow, and a 30 deg turn of
 the mean wind (IEC's extreme direction change): the path re-centred within 60 s, the next 10 minutes' energy >= 97 %
 of a ground station that knows the true mean direction."""
-import dataclasses
 import math
 from dataclasses import replace
 
@@ -10,13 +9,13 @@ import numpy as np
 import pytest
 
 from kite_rto.flight.closed_loop import make_closed_loop
-from kite_rto.flight.controller import ControllerSettings
 from kite_rto.flight.wind_follow import WindFollower, WindFollowSettings
 from kite_rto.kite.mean_wind import EDC_DURATION, MeanWindSettings
 from kite_rto.kite.params import ParameterError
 from kite_rto.kite.plant import Measurement, PlantConfig
 from kite_rto.kite.wind_field import WindFieldSettings
 from kite_rto.kite.wind_frame import rotate_state, wind_rotation
+from kite_rto.testing.wind_turn import fly_following
 
 
 def test_the_direction_is_filtered_and_rate_limited():
@@ -67,47 +66,20 @@ def test_a_controller_that_does_not_follow_sees_the_measurement_itself():
     assert ctl.wind is None and ctl.in_path_frame(m) is m
 
 
-class _TrueVane:
-    """The plant with a perfect vane: the true mean wind direction (the reference ground station)."""
-
-    def __init__(self, plant):
-        self.plant, self.dt = plant, plant.dt
-
-    def _m(self, m):
-        return dataclasses.replace(m, wind_direction=self.plant.wind.mean.direction)
-
-    def measure(self):
-        return self._m(self.plant.measure())
-
-    def step(self, delta):
-        return self._m(self.plant.step(delta))
-
-
-def _fly(config, follow, seed, duration, true_vane=False):
-    plant, ctl = make_closed_loop(plant_config=config, seed=seed, settings=ControllerSettings(follow_wind=follow))
-    src = _TrueVane(plant) if true_vane else plant
-    m = src.measure()
-    out = []
-    for _ in range(round(duration / plant.dt)):
-        m = src.step(ctl.command(m))
-        out.append((m.t, m.tension, ctl.status.direction, m.crashes))
-    return np.array(out), plant
-
-
 @pytest.mark.parametrize("seed", [2])
 def test_after_a_30_degree_turn_the_path_follows_and_keeps_the_energy(seed, tmp_path, monkeypatch):
     monkeypatch.setenv("KITE_RTO_CACHE", str(tmp_path))
     turn = 100.0
     config = replace(PlantConfig(), wind_field=WindFieldSettings(points=(512, 32, 32), components="uvw"),
                      mean_wind=MeanWindSettings(edc_time=turn))
-    flown, plant = _fly(config, WindFollowSettings(enabled=True), seed, turn + EDC_DURATION + 600.0)
-    best, _ = _fly(config, WindFollowSettings(enabled=True, filter_time=1e-9, rate_limit=100.0), seed,
+    flown, plant = fly_following(config, WindFollowSettings(enabled=True), seed, turn + EDC_DURATION + 600.0)
+    best, _ = fly_following(config, WindFollowSettings(enabled=True, filter_time=1e-9, rate_limit=100.0), seed,
                    turn + EDC_DURATION + 600.0, true_vane=True)
-    t, tension, direction, crashes = flown.T
+    t, tension, direction, crashes = flown
     new = plant.wind.mean.direction
     assert math.degrees(new) == pytest.approx(29.2, abs=0.2) and crashes[-1] == 0
     end = turn + EDC_DURATION
     recentred = t[(t > end) & (np.abs(direction - new) < math.radians(5.0))]
     assert recentred.size and recentred[0] - end <= 60.0
     after = t > end
-    assert tension[after].sum() / best[after, 1].sum() >= 0.97
+    assert tension[after].sum() / best[1][after].sum() >= 0.97
