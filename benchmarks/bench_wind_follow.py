@@ -8,7 +8,7 @@ mean direction (the same controller handed the true direction), and the path lef
 
 Measured: the time after the turn's end until the path's direction is first within 5 deg of the new mean direction,
 the rms error of the path's direction after the turn, and the energy (time integral of the measured tension) of the
-``--window`` s after the turn as a percentage of the reference's. Targets (issue): re-centred within 60 s, energy of
+``--window`` s after the turn as a percentage of the reference's. Targets: re-centred within 60 s, energy of
 the following 10 minutes >= 97 %.
 
 Usage: ``python benchmarks/bench_wind_follow.py [--seeds 2,3,4,5] [--turn 100] [--window 600]``. Prints a markdown
