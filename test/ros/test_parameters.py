@@ -162,7 +162,9 @@ def test_optimizer_defaults_build_the_kite_defaults_and_gma_parameters_reach_gma
     from kite_rto.rto.settings import KiteRTOSettings
     v = {s.name: s.default for s in PARAMS}
     assert settings_from_params(v) == KiteRTOSettings()
-    assert sorted(v["mechanisms"]) == sorted(MECHANISMS)
+    kite = KiteRTOSettings().gma
+    assert sorted(v["mechanisms"]) == sorted(m for m in MECHANISMS if getattr(kite, m) is not None)
+    assert kite.settle is None and "settle" not in v["mechanisms"]             # in the library, off for the kite
     dotted = [s.name for s in PARAMS if "." in s.name]
     assert dotted and all(s.split(".")[0] in MECHANISMS for s in dotted)
     for name in dotted:
@@ -171,7 +173,8 @@ def test_optimizer_defaults_build_the_kite_defaults_and_gma_parameters_reach_gma
         value = spec.high if spec.default != spec.high else spec.low
         if mech == "trust_region" and field == "min_radius":
             value = 0.5
-        got = getattr(getattr(settings_from_params({**v, name: value}).gma, mech), field)
+        got = getattr(getattr(settings_from_params({**v, name: value, "mechanisms": list(MECHANISMS)}).gma, mech),
+                      field)
         assert got == value, name
     off = settings_from_params({**v, "mechanisms": ["trust_region", "safe_step"]}).gma
     assert off.undo is None and off.bound_hold is None and off.model_secant is None and off.noise_filter is None
