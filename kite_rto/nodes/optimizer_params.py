@@ -121,8 +121,11 @@ new run and must match to resume it)."""
 
 
 def run_settings(v: dict) -> dict:
-    """The parameter values a run is created with and resumed only with (name -> value)."""
-    return {s.name: v[s.name] for s in PARAMS if s.name not in RUN_INDEPENDENT}
+    """The parameter values a run is created with and resumed only with (name -> value); the ``<mechanism>.<field>``
+    parameters of a mechanism that is off are not among them (they change nothing the run does)."""
+    on = set(v["mechanisms"])
+    return {s.name: v[s.name] for s in PARAMS
+            if s.name not in RUN_INDEPENDENT and ("." not in s.name or s.name.split(".")[0] in on)}
 
 
 def cross_check(v: dict) -> None:

@@ -181,6 +181,11 @@ def test_optimizer_defaults_build_the_kite_defaults_and_gma_parameters_reach_gma
     assert off.modifier_filter is None and off.trust_region == KiteRTOSettings().gma.trust_region
     s = settings_from_params({**v, "effort_schedule": [1.0, 1.5, 3.0], "backoff": 6.0, "filter_gain": 0.7}).gma
     assert s.effort_schedule == (1.0, 1.5, 3.0) and s.backoff == 6.0 and s.filter_gain == 0.7
+    # a run is stored with the parameters of the mechanisms that are on: an older run resumes as it was stored
+    from kite_rto.nodes.optimizer_params import run_settings
+    stored = run_settings(v)
+    assert "undo.sigma" in stored and not any(k.startswith("settle.") for k in stored)
+    assert "settle.step" in run_settings({**v, "mechanisms": v["mechanisms"] + ["settle"]})
 
 
 def test_optimizer_refuses_bad_gma_parameters_naming_them():
