@@ -15,13 +15,9 @@ import math
 from dataclasses import dataclass
 
 from ..kite.params import ParameterError, check_range
-from ..kite.wind_frame import rotate_state, rotate_vector, wind_rotation
+from ..kite.wind_frame import rotate_motion, rotate_vector, wind_rotation
 
 __all__ = ["WindFollowSettings", "WindFollower", "PathFrameMeasurement"]
-
-_RATE_STEP = 1e-3
-"""s: the short step along the rates whose image gives the rates in the turned frame."""
-
 
 @dataclass(frozen=True)
 class WindFollowSettings:
@@ -107,8 +103,5 @@ class WindFollower:
             return m
         if self._rot is None:
             self._rot = wind_rotation(self.direction)
-        rot, h = self._rot, _RATE_STEP
-        state = rotate_state((m.theta, m.phi, m.psi), rot)
-        ahead = rotate_state((m.theta + h * m.theta_dot, m.phi + h * m.phi_dot, m.psi + h * m.psi_dot), rot)
-        rates = tuple(math.remainder(a - b, math.tau) / h for a, b in zip(ahead, state))
-        return PathFrameMeasurement(m, state, rates, rotate_vector(rot, m.position))
+        state, rates = rotate_motion((m.theta, m.phi, m.psi), (m.theta_dot, m.phi_dot, m.psi_dot), self._rot)
+        return PathFrameMeasurement(m, state, rates, rotate_vector(self._rot, m.position))

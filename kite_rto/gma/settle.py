@@ -118,9 +118,8 @@ class SettleMechanism(Mechanism):
             res = results.get(rec.experiment_ids[0]) if rec.experiment_ids else None
             if res is None:
                 continue
-            point = _Point(res.cost, res.constraints, res.cost_std, res.constraints_std)
             if rec.outcome is Decision.WATCHED:
-                self.watch(point)
+                self.watch(res)                 # an ExperimentResult: cost, constraints and their std as watched
             else:
                 self._learned(rec.step, rec.outcome)
 
@@ -146,16 +145,9 @@ def _reference(measured) -> tuple:
     return v.mean(axis=0), per / math.sqrt(len(v)), per
 
 
-@dataclass
-class _Point:
-    cost: float
-    constraints: object
-    cost_std: float | None
-    constraints_std: object
-
-
 def _values(point) -> tuple:
-    """``(values, standard errors)`` of a nominal measurement: cost then constraints (NaN where unknown)."""
+    """``(values, standard errors)`` of a nominal measurement (a :class:`~kite_rto.gma.PlantPoint` or an
+    :class:`~kite_rto.gma.ExperimentResult`): cost then constraints (NaN where unknown)."""
     g = np.atleast_1d(np.asarray(point.constraints, float))
     x = np.r_[float(point.cost), g]
     sc = math.nan if point.cost_std is None else float(point.cost_std)

@@ -23,7 +23,7 @@ from .model import MIN_WIND_HEIGHT, STEP_OUTPUT_NAMES, shared_model
 from .params import KiteParams, ParameterError, check_range
 from .wind import MIN_REFERENCE_WIND, TurbulenceSettings, UniformGust, WindModel
 from .wind_field import FieldWind, MannBox, WindFieldSettings
-from .wind_frame import rotate_state, rotate_vector, transpose, wind_rotation
+from .wind_frame import rotate_motion, rotate_state, rotate_vector, transpose, wind_rotation
 
 __all__ = ["PlantConfig", "NoiseSettings", "Measurement", "KitePlant", "PLANT_PARAMS", "WIND_MODELS",
            "DEFAULT_WIND_MODEL"]
@@ -285,16 +285,11 @@ class KitePlant:
         h, step_py = self._h, self._step_py
         for _ in self._substeps:
             xf, out = step_py(xf, ad, p, h)
-        x = rotate_state(xf, back)
         out = list(out)
+        x, out[_RATES:_RATES + 3] = rotate_motion(xf, out[_RATES:_RATES + 3], back)
         i = _POSITION
         out[i:i + 3] = rotate_vector(back, out[i:i + 3])
         out[_ALTITUDE] = out[i + 2]
-        # rates in the ground frame: the frame's map applied to a short step along the frame's rates
-        eps = 1e-3
-        rf = out[_RATES:_RATES + 3]
-        ahead = rotate_state([a + eps * r for a, r in zip(xf, rf)], back)
-        out[_RATES:_RATES + 3] = [math.remainder(a - b, math.tau) / eps for a, b in zip(ahead, x)]
         return x, out
 
     def reset(self) -> Measurement:

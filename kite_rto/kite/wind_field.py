@@ -263,8 +263,10 @@ class FieldWind(WindModel):
         self._vane_std = float(vane_noise)
         self._t = 0.0
         three = components == "uvw"
-        self._flat_v = memoryview(np.ascontiguousarray(box.raw_uvw[1]).reshape(-1)) if three else None
-        self._flat_w = memoryview(np.ascontiguousarray(box.raw_uvw[2]).reshape(-1)) if three else None
+        # (flat box, offset) of u', v' and w'; empty with the longitudinal component alone
+        self._components3 = tuple(zip(
+            [self._flat] + [memoryview(np.ascontiguousarray(box.raw_uvw[i]).reshape(-1)) for i in (1, 2)],
+            (box.offset,) + box.offsets[1:])) if three else ()
         # the anemometer's line of the box at (y, z) = (0, z_ref), one value per x point: one linear interpolation
         # per sample instead of a trilinear one (u', and v' for the vane)
         dx = float(s.spacing[0])
@@ -289,11 +291,10 @@ class FieldWind(WindModel):
     def turbulence3_at(self, x: float, y: float, z: float) -> tuple:
         """(u', v', w') (m/s) at the point (x, y, z) m of the box's frame at the current time (trilinear; u' as
         :meth:`turbulence_at` computes it, to the bit)."""
-        if self._flat_v is None:
+        if not self._components3:
             return self.turbulence_at(x, y, z), 0.0, 0.0
         cell = self._cell_of(x, y, z)
-        return tuple(self._scale * _trilinear(u, *cell) - off
-                     for u, off in zip((self._flat, self._flat_v, self._flat_w), (self._offset,) + self.box.offsets[1:]))
+        return tuple(self._scale * _trilinear(u, *cell) - off for u, off in self._components3)
 
     def _cell_of(self, x: float, y: float, z: float) -> tuple:
         """The flat indices of the two corner columns of the point's cell, the stride along z and the fractions."""
@@ -317,8 +318,7 @@ class FieldWind(WindModel):
         mean wind's frame, the box sampled there, and its components added to the mean profile along that frame.
         """
         x, y, z = position
-        mean = self.mean
-        factor, chi = (mean.speed_factor, mean.direction) if mean is not None else (1.0, 0.0)
+        factor, chi = self._mean_now()
         if chi:
             c, s_ = math.cos(chi), math.sin(chi)
             x, y = c * x + s_ * y, -s_ * x + c * y
@@ -332,24 +332,32 @@ class FieldWind(WindModel):
     def vane(self) -> float:
         """Wind vane reading at (0, 0, z_ref), rad from the ground frame's x towards y: the mean direction plus the
         horizontal direction of the turbulence there plus measurement noise."""
-        mean = self.mean
-        factor, chi = (mean.speed_factor, mean.direction) if mean is not None else (1.0, 0.0)
+        factor, chi = self._mean_now()
         along, dv = self._line_values()
         d = chi + math.atan2(dv, self.w_ref0 * factor + along)
         if self._vane_std > 0:
             d += self._vane_std * self._normals.next()
         return d
 
-    def _line_values(self) -> tuple:
-        """(u', v') at the anemometer, m/s (linear along the lines)."""
+    def _line_index(self) -> tuple:
+        """``(i0, i1, fraction)``: where the anemometer is on its lines (:attr:`_anemometer_line`, the box's x
+        points at (0, z_ref), which tile periodically) at the current time."""
         fx = -self._shift * self._inv[0]
         fl = math.floor(fx)
-        ax = fx - fl
         n = len(self._anemometer_line)
         i0 = int(fl) % n
-        i1 = i0 + 1 if i0 + 1 < n else 0
+        return i0, (i0 + 1 if i0 + 1 < n else 0), fx - fl
+
+    def _line_values(self) -> tuple:
+        """(u', v') at the anemometer, m/s (linear along the lines)."""
+        i0, i1, ax = self._line_index()
         u, v = self._anemometer_line, self._vane_line
         return u[i0] + (u[i1] - u[i0]) * ax, v[i0] + (v[i1] - v[i0]) * ax
+
+    def _mean_now(self) -> tuple:
+        """``(speed factor, direction rad)`` of the mean wind now (``(1, 0)`` without a changing one)."""
+        mean = self.mean
+        return (mean.speed_factor, mean.direction) if mean is not None else (1.0, 0.0)
 
     def turbulence_at(self, x: float, y: float, z: float) -> float:
         """u' (m/s) at the point (x, y, z) at the current time (trilinear)."""
@@ -368,17 +376,12 @@ class FieldWind(WindModel):
         there (u' alone, or u' and v' with ``components = "uvw"``) plus measurement noise."""
         if self.turns:
             along, dv = self._line_values()
-            w = math.hypot(self.w_ref0 * (self.mean.speed_factor if self.mean is not None else 1.0) + along, dv)
+            w = math.hypot(self.w_ref0 * self._mean_now()[0] + along, dv)
             if self._noise_std > 0:
                 w += self._noise_std * self._normals.next()
             return 0.0 if 0.0 > w else w
-        fx = -self._shift * self._inv[0]
-        fl = math.floor(fx)
-        ax = fx - fl
+        i0, i1, ax = self._line_index()
         line = self._anemometer_line
-        n = len(line)
-        i0 = int(fl) % n
-        i1 = i0 + 1 if i0 + 1 < n else 0
         w = self.w_ref0 + line[i0] + (line[i1] - line[i0]) * ax
         if self._noise_std > 0:
             w += self._noise_std * self._normals.next()

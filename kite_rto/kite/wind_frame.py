@@ -15,9 +15,11 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["wind_rotation", "transpose", "rotate_state", "rotate_vector"]
+__all__ = ["wind_rotation", "transpose", "rotate_state", "rotate_vector", "rotate_motion", "RATE_STEP"]
 
 _sin, _cos, _atan2, _sqrt = math.sin, math.cos, math.atan2, math.sqrt
+RATE_STEP = 1e-3
+"""s: the short step along the rates whose image in the turned frame gives the rates there (:func:`rotate_motion`)."""
 
 
 def wind_rotation(direction: float, tilt: float = 0.0) -> tuple:
@@ -56,3 +58,12 @@ def rotate_state(state, rotation: tuple) -> list:
     along_theta = -st2 * hx + ct2 * sp2 * hy + ct2 * cp2 * hz
     along_phi = cp2 * hy - sp2 * hz
     return [theta2, phi2, _atan2(-along_phi, along_theta)]
+
+
+def rotate_motion(state, rates, rotation: tuple) -> tuple:
+    """``(state, rates)`` of the same motion in the frame ``p' = R p``: the state as :func:`rotate_state` turns it,
+    the rates (rad/s) from the image of a step of :data:`RATE_STEP` along them (wrapped differences)."""
+    turned = rotate_state(state, rotation)
+    h = RATE_STEP
+    ahead = rotate_state([a + h * r for a, r in zip(state, rates)], rotation)
+    return turned, [math.remainder(a - b, math.tau) / h for a, b in zip(ahead, turned)]
